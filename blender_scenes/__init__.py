@@ -1,0 +1,1 @@
+"""Procedural Blender scenes, one module per scene (arrives with the dataset issue)."""

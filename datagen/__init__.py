@@ -1,0 +1,1 @@
+"""Dataset generator: the bpy render loop that feeds the event simulator (arrives with the dataset issue)."""

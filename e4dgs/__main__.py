@@ -1,0 +1,3 @@
+from e4dgs.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,24 @@
+"""The `e4dgs` command: one entry point, one subcommand per tool."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from simulator.cli import add_simulate_parser, add_view_parser
+
+    parser = argparse.ArgumentParser(prog="e4dgs", description="Event-camera 4D reconstruction toolkit")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_simulate_parser(sub)
+    add_view_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,105 @@
+"""Image files: linear OpenEXR (read/write) and 8/16-bit PNG (sRGB, linearised on read).
+
+Single-channel EXRs are written as channel `V` (as Blender writes them); RGB as `R`, `G`, `B`.
+Readers return float32 arrays: [H, W] for one channel, [H, W, 3] for RGB (alpha dropped).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from e4dgs.fileio import atomic_output
+
+_SINGLE_CHANNEL_NAMES = ("V", "Y", "L", "Z", "A")
+
+
+class ImageReadError(ValueError):
+    """An image file cannot be read as the linear frame it should be."""
+
+
+def read_exr(path: str | os.PathLike) -> np.ndarray:
+    import OpenEXR
+
+    path = Path(path)
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            channels = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
+    except Exception as exc:  # OpenEXR raises plain RuntimeError/Exception types
+        raise ImageReadError(f"{path}: cannot read OpenEXR file ({exc})") from None
+    upper = {name.split(".")[-1].upper(): arr for name, arr in channels.items()}
+    if all(c in upper for c in "RGB"):
+        return np.stack([upper[c] for c in "RGB"], axis=-1).astype(np.float32)
+    for name in _SINGLE_CHANNEL_NAMES:
+        if name in upper:
+            return upper[name].astype(np.float32)
+    if len(channels) == 1:
+        return next(iter(channels.values())).astype(np.float32)
+    raise ImageReadError(f"{path}: expected channels R,G,B or a single channel (V/Y), found {sorted(channels)}")
+
+
+def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) -> Path:
+    """Write float image [H,W] (channel V) or [H,W,3] (R,G,B) atomically; ZIP-compressed."""
+    import OpenEXR
+
+    image = np.asarray(image, dtype=np.float16 if half else np.float32)
+    if image.ndim == 2:
+        channels = {"V": np.ascontiguousarray(image)}
+    elif image.ndim == 3 and image.shape[2] == 3:
+        channels = {c: np.ascontiguousarray(image[..., i]) for i, c in enumerate("RGB")}
+    else:
+        raise ValueError(f"write_exr: expected [H,W] or [H,W,3], got shape {image.shape}")
+    header = {"type": OpenEXR.scanlineimage, "compression": OpenEXR.ZIP_COMPRESSION}
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+    return path
+
+
+def read_png_linear(path: str | os.PathLike) -> np.ndarray:
+    """8- or 16-bit PNG (or other cv2-readable integer image), treated as sRGB and linearised."""
+    import cv2
+
+    from simulator.pixel import srgb_to_linear
+
+    path = Path(path)
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ImageReadError(f"{path}: cannot read image")
+    if img.dtype == np.uint8:
+        v = img.astype(np.float64) / 255.0
+    elif img.dtype == np.uint16:
+        v = img.astype(np.float64) / 65535.0
+    else:
+        raise ImageReadError(f"{path}: expected an 8- or 16-bit image, got {img.dtype}")
+    if v.ndim == 3:
+        v = v[..., 2::-1] if v.shape[2] >= 3 else v[..., 0]  # BGR(A) -> RGB
+    return srgb_to_linear(v).astype(np.float32)
+
+
+def write_png_srgb(path: str | os.PathLike, linear: np.ndarray) -> Path:
+    """Linear [H,W] or [H,W,3] image -> 8-bit sRGB PNG (atomic)."""
+    import cv2
+
+    from simulator.pixel import linear_to_srgb
+
+    v = np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
+    if v.ndim == 3:
+        v = v[..., ::-1]
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        ok, buf = cv2.imencode(".png", v)
+        if not ok:
+            raise ValueError(f"{path}: PNG encoding failed")
+        tmp.write_bytes(buf.tobytes())
+    return path
+
+
+def read_linear_image(path: str | os.PathLike) -> np.ndarray:
+    """Linear float32 image from EXR (as stored) or PNG/JPG/TIF (sRGB, linearised)."""
+    path = Path(path)
+    if path.suffix.lower() == ".exr":
+        return read_exr(path)
+    return read_png_linear(path)

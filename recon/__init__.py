@@ -1,0 +1,1 @@
+"""Reconstruction: Gaussian model, rasterizer backends, deformation, methods (later issues)."""

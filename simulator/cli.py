@@ -1,0 +1,144 @@
+"""`e4dgs simulate` and `e4dgs view`: frames -> event file, event file -> picture or video."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
+
+
+def list_frames(folder: Path) -> list[Path]:
+    if not folder.is_dir():
+        raise SystemExit(f"error: --frames {folder}: not a directory")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if len(files) < 2:
+        raise SystemExit(f"error: --frames {folder}: need at least two images ({', '.join(sorted(IMAGE_SUFFIXES))}), found {len(files)}")
+    return files
+
+
+def read_timestamps(path: Path, n_frames: int) -> list[int]:
+    values = []
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise SystemExit(f"error: --timestamps {path}: {exc.strerror}") from None
+    for lineno, line in enumerate(lines, 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            values.append(int(line))
+        except ValueError:
+            raise SystemExit(f"error: {path}:{lineno}: expected an integer microsecond timestamp, got {line!r}") from None
+    if len(values) != n_frames:
+        raise SystemExit(f"error: {path}: {len(values)} timestamps for {n_frames} frames")
+    return values
+
+
+def add_simulate_parser(sub) -> None:
+    p = sub.add_parser("simulate", help="convert a folder of frames into an event file (DSEC HDF5)")
+    p.add_argument("--frames", type=Path, required=True,
+                   help="folder of frames sorted by name: EXR (linear) or PNG (sRGB, linearised)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--fps", type=float, help="frame rate; frame k is at t0 + round(k * 1e6 / fps) us")
+    src.add_argument("--timestamps", type=Path, help="file with one microsecond timestamp per frame")
+    p.add_argument("--t0", type=int, default=0, help="time of the first frame with --fps, in us (default 0)")
+    p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
+    p.add_argument("--config", type=Path, help="simulator config YAML (default: noise-free, C = 0.2)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=run_simulate)
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from e4dgs.config import ConfigError, dump_config, load_config, to_dict
+    from e4dgs.imageio import ImageReadError, read_linear_image
+    from simulator.config import SimulatorConfig
+    from simulator.h5io import EventFileWriter
+    from simulator.simulator import EventSimulator, FrameError
+
+    try:
+        config = load_config(SimulatorConfig, args.config) if args.config else SimulatorConfig()
+    except ConfigError as exc:
+        raise SystemExit(f"error: {exc}") from None
+    files = list_frames(args.frames)
+    if args.timestamps:
+        t_us = read_timestamps(args.timestamps, len(files))
+    else:
+        if not args.fps > 0:
+            raise SystemExit(f"error: --fps must be positive, got {args.fps}")
+        t_us = [args.t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
+    first = read_linear_image(files[0])
+    height, width = first.shape[:2]
+    attrs = {f"sim_{k}": v for k, v in to_dict(config).items()}
+    attrs.update(simulator_config=dump_config(config), seed=args.seed, source_frames=str(args.frames),
+                 n_frames=len(files))
+    sim = EventSimulator(config, width, height, seed=args.seed)
+    pending, n_pending, n_events = [], 0, 0
+    with EventFileWriter(args.out, width, height, t_offset_us=t_us[0], attrs=attrs) as writer:
+        for k, path in enumerate(tqdm(files, desc="simulate", unit="frame")):
+            try:
+                frame = first if k == 0 else read_linear_image(path)
+                events = sim.push(frame, t_us[k])
+            except (FrameError, ImageReadError) as exc:
+                raise SystemExit(f"error: {path}: {exc}") from None
+            pending.append(events)
+            n_pending += len(events)
+            if n_pending >= 1 << 20:
+                writer.append(np.concatenate(pending))
+                n_events += n_pending
+                pending, n_pending = [], 0
+        if pending:
+            writer.append(np.concatenate(pending))
+            n_events += n_pending
+        writer.close(t_end_us=t_us[-1])
+    print(f"{args.out}: {n_events} events from {len(files)} frames ({width}x{height})")
+    return 0
+
+
+def add_view_parser(sub) -> None:
+    p = sub.add_parser("view", help="draw events of a time window as a PNG, or a sliding window as MP4")
+    p.add_argument("events", type=Path, help="event file (.h5)")
+    p.add_argument("--t0", default=None, help="window start (us, or with unit: 10ms, 0.5s); default: start")
+    p.add_argument("--t1", default=None, help="window end (exclusive); default: end of the stream")
+    p.add_argument("--out", type=Path, required=True, help=".png for one frame, .mp4 for a video")
+    p.add_argument("--window", default="10ms", help="video: events shown per frame (default 10ms)")
+    p.add_argument("--step", default=None, help="video: time between frames (default: the window)")
+    p.add_argument("--fps", type=float, default=30.0, help="video frame rate (default 30)")
+    p.set_defaults(func=run_view)
+
+
+def run_view(args: argparse.Namespace) -> int:
+    from simulator.h5io import EventFileError, read_info, read_window
+    from simulator.view import event_frame, parse_time_us, save_png, save_video
+
+    try:
+        info = read_info(args.events)
+        start = info["t_offset_us"]
+        end = int(info.get("t_end_us", start)) + 1
+        t0 = parse_time_us(args.t0) if args.t0 is not None else start
+        t1 = parse_time_us(args.t1) if args.t1 is not None else end
+        if t1 <= t0:
+            raise SystemExit(f"error: --t1 ({t1} us) must be after --t0 ({t0} us)")
+        suffix = args.out.suffix.lower()
+        if suffix == ".png":
+            stream = read_window(args.events, t0, t1)
+            save_png(args.out, event_frame(stream))
+            print(f"{args.out}: {len(stream)} events in [{t0}, {t1}) us")
+        elif suffix == ".mp4":
+            window = parse_time_us(args.window)
+            step = parse_time_us(args.step) if args.step else window
+            if window <= 0 or step <= 0:
+                raise SystemExit("error: --window and --step must be positive")
+            starts = range(t0, max(t0 + 1, t1 - window + 1), step)
+            frames = [event_frame(read_window(args.events, s, s + window)) for s in starts]
+            save_video(args.out, frames, fps=args.fps)
+            print(f"{args.out}: {len(frames)} frames of {window} us every {step} us")
+        else:
+            raise SystemExit(f"error: --out {args.out}: expected a .png or .mp4 file name")
+    except (EventFileError, ValueError) as exc:
+        raise SystemExit(f"error: {exc}") from None
+    return 0

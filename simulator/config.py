@@ -1,0 +1,89 @@
+"""Simulator configuration: a frozen dataclass; every effect is off unless its parameter enables it."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from e4dgs.config import ConfigError
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """DVS pixel model parameters (v2e's model; names carry units).
+
+    Defaults are the ideal, noise-free sensor: log(I + 1e-3) response, C+ = C- = 0.2, no mismatch.
+    An effect runs only when its parameter enables it (rate > 0, cutoff > 0, period > 0, sigma > 0).
+    """
+
+    # Log response. "log": log(I + log_eps) (as ESIM). "linlog": v2e's lin-log on digital numbers
+    # DN = linlog_dn_per_unit * I: linear (DN * log(thr)/thr) below thr = linlog_threshold_dn DN, log above.
+    log_mode: Literal["log", "linlog"] = "log"
+    log_eps: float = 1e-3
+    linlog_threshold_dn: float = 20.0
+    linlog_dn_per_unit: float = 255.0
+
+    # Contrast thresholds (log units) and per-pixel mismatch: C ~ Normal(C, sigma), clamped to >= min.
+    pos_threshold: float = 0.2
+    neg_threshold: float = 0.2
+    threshold_sigma: float = 0.0
+    threshold_min: float = 0.01
+
+    # Photoreceptor low-pass (v2e): first-order IIR with cutoff scaled by intensity; 0 = off.
+    lowpass_cutoff_hz: float = 0.0
+    # Refractory period: after an event the pixel is blind and its reference follows the input; 0 = off.
+    refractory_us: int = 0
+    # Leak: reference drifts down at leak_rate_hz ON events per second (log-normal per-pixel spread).
+    leak_rate_hz: float = 0.0
+    leak_rate_sigma_decades: float = 0.1
+    # Shot noise: Poisson ON+OFF events at this total rate per pixel in the dark (x0.25 at white, v2e).
+    shot_noise_rate_hz: float = 0.0
+    # Hot pixels: this fraction of pixels emits ON events as a Poisson process at hot_pixel_rate_hz.
+    hot_pixel_fraction: float = 0.0
+    hot_pixel_rate_hz: float = 0.0
+
+    def __post_init__(self):
+        def need(ok: bool, field: str, what: str):
+            if not ok:
+                raise ConfigError(f"{field}: expected {what}, got {getattr(self, field)!r}")
+
+        finite = lambda v: isinstance(v, (int, float)) and math.isfinite(v)  # noqa: E731
+        need(self.log_mode in ("log", "linlog"), "log_mode", "'log' or 'linlog'")
+        need(finite(self.log_eps) and self.log_eps > 0, "log_eps", "a positive number")
+        need(finite(self.linlog_threshold_dn) and self.linlog_threshold_dn > 1, "linlog_threshold_dn", "a number > 1")
+        need(finite(self.linlog_dn_per_unit) and self.linlog_dn_per_unit > 0, "linlog_dn_per_unit", "a positive number")
+        need(finite(self.threshold_min) and self.threshold_min > 0, "threshold_min", "a positive number")
+        for name in ("pos_threshold", "neg_threshold"):
+            need(finite(getattr(self, name)) and getattr(self, name) >= self.threshold_min, name,
+                 f"a number >= threshold_min ({self.threshold_min})")
+        for name in ("threshold_sigma", "lowpass_cutoff_hz", "leak_rate_hz", "leak_rate_sigma_decades",
+                     "shot_noise_rate_hz", "hot_pixel_rate_hz"):
+            need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
+        need(isinstance(self.refractory_us, int) and self.refractory_us >= 0, "refractory_us", "a non-negative integer")
+        need(finite(self.hot_pixel_fraction) and 0 <= self.hot_pixel_fraction <= 1, "hot_pixel_fraction", "a number in [0, 1]")
+
+    # Which optional stages run.
+    @property
+    def has_mismatch(self) -> bool:
+        return self.threshold_sigma > 0
+
+    @property
+    def has_lowpass(self) -> bool:
+        return self.lowpass_cutoff_hz > 0
+
+    @property
+    def has_leak(self) -> bool:
+        return self.leak_rate_hz > 0
+
+    @property
+    def has_shot_noise(self) -> bool:
+        return self.shot_noise_rate_hz > 0
+
+    @property
+    def has_hot_pixels(self) -> bool:
+        return self.hot_pixel_fraction > 0 and self.hot_pixel_rate_hz > 0
+
+    @property
+    def is_noise_free(self) -> bool:
+        """No random events (shot noise, hot pixels); leak, mismatch, low-pass, refractory are deterministic."""
+        return not (self.has_shot_noise or self.has_hot_pixels)

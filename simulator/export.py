@@ -1,0 +1,80 @@
+"""Exporters of an EventStream to the formats other tools read.
+
+- tonic: structured array with fields x, y, t (int64, microseconds), p (bool: True = ON), the
+  ordering and types `tonic` transforms expect (`tonic.io.make_structured_array`), plus the sensor
+  size (width, height, 2) as tonic spells it.
+- E2VID text: first line "width height", then one event per line "t x y p" with t in seconds and
+  p in {0, 1} (the rpg_e2vid input format).
+- NumPy .npz: arrays t (int64 us), x, y (uint16), p (int8, +/-1), width, height.
+All file writers write to a temporary name and rename when complete.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from e4dgs.fileio import atomic_output
+from simulator.events import EventStream, make_events, validate_events
+
+TONIC_DTYPE = np.dtype([("x", "<i8"), ("y", "<i8"), ("t", "<i8"), ("p", "?")])
+
+
+def to_tonic(stream: EventStream) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """(events [N] of TONIC_DTYPE, sensor_size (W, H, 2))."""
+    ev = stream.events
+    out = np.empty(len(ev), TONIC_DTYPE)
+    out["x"], out["y"], out["t"], out["p"] = ev["x"], ev["y"], ev["t"], ev["p"] > 0
+    return out, (stream.width, stream.height, 2)
+
+
+def from_tonic(events: np.ndarray, sensor_size: tuple[int, int, int]) -> EventStream:
+    p = np.where(events["p"].astype(bool), 1, -1).astype(np.int8)
+    return EventStream(make_events(events["t"], events["x"], events["y"], p), int(sensor_size[0]), int(sensor_size[1]))
+
+
+def write_e2vid_txt(path: str | os.PathLike, stream: EventStream, chunk: int = 1 << 20) -> Path:
+    """E2VID text file: "width height" header, then "t x y p" lines (t seconds, microsecond digits)."""
+    path = Path(path)
+    with atomic_output(path) as tmp, open(tmp, "w") as fh:
+        fh.write(f"{stream.width} {stream.height}\n")
+        ev = stream.events
+        for i in range(0, len(ev), chunk):
+            part = ev[i:i + chunk]
+            sec, us = np.divmod(part["t"], 1_000_000)
+            cols = np.column_stack([sec, us, part["x"], part["y"], (part["p"] > 0).astype(np.int64)])
+            np.savetxt(fh, cols, fmt="%d.%06d %d %d %d")
+    return path
+
+
+def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
+    path = Path(path)
+    with open(path) as fh:
+        header = fh.readline().split()
+        if len(header) != 2:
+            raise ValueError(f"{path}: first line must be 'width height', got {' '.join(header)!r}")
+        width, height = int(header[0]), int(header[1])
+        data = np.loadtxt(fh, dtype=str, ndmin=2)
+    if data.size == 0:
+        return EventStream(make_events([], [], [], []), width, height)
+    sec_us = np.char.partition(data[:, 0], ".")
+    t = sec_us[:, 0].astype(np.int64) * 1_000_000 + np.char.ljust(sec_us[:, 2], 6, "0").astype(np.int64)
+    p = np.where(data[:, 3].astype(np.int64) > 0, 1, -1).astype(np.int8)
+    stream = EventStream(make_events(t, data[:, 1].astype(np.uint16), data[:, 2].astype(np.uint16), p), width, height)
+    validate_events(stream.events, width, height)
+    return stream
+
+
+def write_npz(path: str | os.PathLike, stream: EventStream) -> Path:
+    path = Path(path)
+    ev = stream.events
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, t=ev["t"], x=ev["x"], y=ev["y"], p=ev["p"], width=stream.width, height=stream.height)
+    return path
+
+
+def read_npz(path: str | os.PathLike) -> EventStream:
+    with np.load(path) as z:
+        return EventStream(make_events(z["t"], z["x"], z["y"], z["p"]), int(z["width"]), int(z["height"]))

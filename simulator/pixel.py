@@ -1,0 +1,92 @@
+"""Pure per-pixel functions of the DVS model: colour to luminance, log responses, low-pass, rates.
+
+Arrays in, arrays out, no state. Intensities are scene-linear luminance (1.0 = diffuse white);
+log intensities are natural-log units; times are seconds where named `_s`, microseconds `_us`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+REC709_LUMA = (0.2126, 0.7152, 0.0722)
+# v2e maps 8-bit DN to the photoreceptor bandwidth scale as (DN + 20) / 275.
+_INTEN_OFFSET_DN, _INTEN_SCALE_DN = 20.0, 275.0
+# v2e: shot-noise rate at full white is this fraction of the rate in the dark.
+SHOT_NOISE_WHITE_FACTOR = 0.25
+
+
+def rec709_luma(rgb: np.ndarray) -> np.ndarray:
+    """Linear RGB [H,W,3] -> linear luminance [H,W] (Rec.709 / sRGB primaries)."""
+    r, g, b = REC709_LUMA
+    return r * rgb[..., 0] + g * rgb[..., 1] + b * rgb[..., 2]
+
+
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0,1] -> linear light (IEC 61966-2-1)."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(v: np.ndarray) -> np.ndarray:
+    """Linear light -> sRGB-encoded values, clipped to [0,1]."""
+    v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
+    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+def log_response(intensity: np.ndarray, eps: float, out: np.ndarray | None = None) -> np.ndarray:
+    """log(I + eps) [same shape], in the precision of `out` (float64 when out is None); finite for I = 0."""
+    out = np.add(intensity, eps, out=out, dtype=np.float64 if out is None else out.dtype)
+    return np.log(out, out=out)
+
+
+def linlog_response(intensity: np.ndarray, threshold_dn: float, dn_per_unit: float,
+                    out: np.ndarray | None = None) -> np.ndarray:
+    """v2e's lin-log in float64: with DN = dn_per_unit * I, DN * log(thr)/thr for DN <= thr, else log(DN).
+
+    Continuous at DN = thr (both sides equal log(thr)); zero at DN = 0.
+    """
+    dn = np.multiply(intensity, dn_per_unit, dtype=np.float64)
+    res = np.log(np.maximum(dn, threshold_dn))
+    low = dn <= threshold_dn
+    res[low] = dn[low] * (math.log(threshold_dn) / threshold_dn)
+    if out is not None:
+        out[...] = res
+        return out
+    return res
+
+
+def intensity01(intensity: np.ndarray) -> np.ndarray:
+    """v2e's normalised intensity (DN + 20) / 275 with DN = 255 I: sets photoreceptor bandwidth."""
+    return (np.asarray(intensity, dtype=np.float64) * 255.0 + _INTEN_OFFSET_DN) / _INTEN_SCALE_DN
+
+
+def lowpass_step(lp_prev: np.ndarray, log_new: np.ndarray, inten01: np.ndarray, dt_s: float,
+                 cutoff_hz: float) -> np.ndarray:
+    """One step of v2e's intensity-dependent first-order photoreceptor filter.
+
+    tau = 1 / (2 pi cutoff_hz); the update weight eps = inten01 * dt / tau is clamped to 1, so bright
+    pixels follow the input faster than dark ones. Returns the new filtered log intensity [P].
+    """
+    tau_s = 1.0 / (2.0 * math.pi * cutoff_hz)
+    eps = np.minimum(inten01 * (dt_s / tau_s), 1.0)
+    return lp_prev + eps * (log_new - lp_prev)
+
+
+def sample_thresholds(rng: np.random.Generator, nominal: float, sigma: float, minimum: float,
+                      n_pixels: int) -> np.ndarray:
+    """Per-pixel contrast thresholds [P]: Normal(nominal, sigma) clamped to >= minimum."""
+    if sigma <= 0:
+        return np.full(n_pixels, nominal, dtype=np.float64)
+    return np.maximum(rng.normal(nominal, sigma, n_pixels), minimum)
+
+
+def shot_noise_rates_hz(inten01: np.ndarray, total_rate_hz: float, c_nominal: float,
+                        c_pixel: np.ndarray) -> np.ndarray:
+    """Per-pixel, per-polarity shot-noise rate [P] as in v2e.
+
+    Half the total rate per polarity, scaled from 1 in the dark to SHOT_NOISE_WHITE_FACTOR at white,
+    and by nominal / actual threshold (pixels with smaller thresholds are noisier).
+    """
+    w = np.clip(inten01, 0.0, 1.0)
+    return (0.5 * total_rate_hz) * ((SHOT_NOISE_WHITE_FACTOR - 1.0) * w + 1.0) * (c_nominal / c_pixel)

@@ -1,0 +1,173 @@
+"""The stateful DVS simulator: frames in, events out, one sensor per instance.
+
+`EventSimulator(config, width, height, seed).push(frame, t_us)` takes a linear-light frame
+([H,W] luminance, or [H,W,3] linear RGB reduced with Rec.709 luma) and returns the events since the
+previous frame as an `EVENT_DTYPE` array. The first frame only initialises the pixels.
+`simulate(frames, t_us, config)` runs a whole sequence into an `EventStream`.
+
+Stages, each run only when the config enables it: log response -> photoreceptor low-pass -> leak
+(drift of the reference, applied as a rising offset on the input so the interval stays linear) ->
+shot noise and hot pixels (random events) -> threshold crossings with per-pixel mismatch,
+refractory period and exact per-crossing timestamps (`kernels.emit_events`).
+"""
+from __future__ import annotations
+
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from simulator import pixel
+from simulator.config import SimulatorConfig
+from simulator.events import EventStream, empty_events
+from simulator.kernel_ref import emit_events_ref
+from simulator.kernels import Workspace, emit_events
+from simulator.noise import draw_noise_events
+
+_NEVER_US = np.iinfo(np.int64).min // 4  # "no event yet" for the refractory clock
+BACKENDS = {"fast": emit_events, "ref": emit_events_ref}
+
+
+class FrameError(ValueError):
+    """A frame or its timestamp cannot be simulated (shape, values, time order)."""
+
+
+class EventSimulator:
+    """Per-pixel state of one DVS sensor; see module docstring for the model."""
+
+    def __init__(self, config: SimulatorConfig, width: int, height: int, seed: int = 0,
+                 backend: str = "fast"):
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")
+        if width <= 0 or height <= 0:
+            raise ValueError(f"sensor size must be positive, got {width}x{height}")
+        self.config, self.width, self.height, self.seed = config, int(width), int(height), int(seed)
+        self._emit = BACKENDS[backend]
+        self._emit_kwargs = {"workspace": Workspace()} if backend == "fast" else {}
+        P = self.n_pixels = self.width * self.height
+        # Independent streams: fixed-pattern parameters, then temporal noise.
+        fixed_rng, self._noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+        c = config
+        # thresholds: [P] with mismatch, [1] (shared by all pixels) without
+        n_c = P if c.has_mismatch else 1
+        self.c_pos = pixel.sample_thresholds(fixed_rng, c.pos_threshold, c.threshold_sigma, c.threshold_min, n_c)
+        self.c_neg = pixel.sample_thresholds(fixed_rng, c.neg_threshold, c.threshold_sigma, c.threshold_min, n_c)
+        self._leak_rates_hz = None
+        self._leak_phase = None
+        if c.has_leak:
+            decades = fixed_rng.normal(0.0, c.leak_rate_sigma_decades, P) if c.leak_rate_sigma_decades > 0 else 0.0
+            self._leak_rates_hz = c.leak_rate_hz * 10.0 ** decades * np.ones(P)
+            self._leak_phase = fixed_rng.random(P)  # desynchronises leak events across pixels
+        self.hot_pixels = None
+        if c.has_hot_pixels:
+            n_hot = int(round(c.hot_pixel_fraction * P))
+            self.hot_pixels = np.sort(fixed_rng.choice(P, size=n_hot, replace=False)).astype(np.int64)
+        self._no_noise = (np.zeros(P + 1, np.int64), np.empty(0, np.int64), np.empty(0, np.int8))
+        self.t_prev_us: int | None = None
+        self.n_frames = 0
+        self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
+
+    # -- input checks -----------------------------------------------------------------------
+    def _prepare(self, frame, t_us) -> tuple[np.ndarray, int]:
+        where = f"frame {self.n_frames} (t={t_us} us)"
+        if isinstance(t_us, (bool, np.bool_)) or not isinstance(t_us, (int, np.integer)):
+            raise FrameError(f"{where}: timestamp must be an integer number of microseconds, got {type(t_us).__name__}")
+        t_us = int(t_us)
+        if self.t_prev_us is not None and t_us <= self.t_prev_us:
+            raise FrameError(f"{where}: timestamps must increase, got {t_us} us after {self.t_prev_us} us")
+        frame = np.asarray(frame)
+        if not np.issubdtype(frame.dtype, np.floating):
+            raise FrameError(f"{where}: expected a linear-light float frame, got dtype {frame.dtype} "
+                             "(8-bit images are sRGB: linearise them with simulator.pixel.srgb_to_linear)")
+        if frame.ndim == 3 and frame.shape[2] in (3, 4):
+            frame = pixel.rec709_luma(frame[..., :3])
+        elif frame.ndim == 3 and frame.shape[2] == 1:
+            frame = frame[..., 0]
+        if frame.shape != (self.height, self.width):
+            raise FrameError(f"{where}: frame size {frame.shape} does not match the sensor "
+                             f"(height, width) = ({self.height}, {self.width})")
+        lo, hi = frame.min(), frame.max()
+        if not (lo >= 0 and hi < np.inf):
+            bad = ~(np.isfinite(frame) & (frame >= 0))
+            r, col = np.argwhere(bad)[0]
+            raise FrameError(f"{where}: intensities must be finite and >= 0, got {frame[r, col]} at (row {r}, col {col})")
+        return frame.reshape(-1), t_us
+
+    def _log(self, frame_flat: np.ndarray) -> np.ndarray:
+        """Log response in the frame's own precision (float32 frames: float32 logs, float64: float64).
+
+        Two buffers per dtype alternate, so the previous frame's level stays valid without copies.
+        """
+        c = self.config
+        dtype = np.float32 if frame_flat.dtype == np.float32 else np.float64
+        bufs = self._log_bufs.setdefault(np.dtype(dtype), [np.empty(self.n_pixels, dtype) for _ in range(2)])
+        out = bufs[self.n_frames % 2]
+        frame_flat = frame_flat.astype(dtype, copy=False)
+        if c.log_mode == "log":
+            return pixel.log_response(frame_flat, dtype(c.log_eps), out=out)
+        return pixel.linlog_response(frame_flat, c.linlog_threshold_dn, c.linlog_dn_per_unit, out=out)
+
+    # -- simulation -------------------------------------------------------------------------
+    def push(self, frame: np.ndarray, t_us: int) -> np.ndarray:
+        """Feed the frame at t_us; return the events in (previous frame time, t_us] (EVENT_DTYPE)."""
+        frame, t_us = self._prepare(frame, t_us)
+        c = self.config
+        log_now = self._log(frame)
+        if self.t_prev_us is None:
+            self._init_state(log_now)
+            self.t_prev_us, self.n_frames = t_us, 1
+            return empty_events()
+        dt_s = (t_us - self.t_prev_us) * 1e-6
+        level = log_now
+        inten01 = pixel.intensity01(frame) if (c.has_lowpass or c.has_shot_noise) else None
+        if c.has_lowpass:
+            self._lp = pixel.lowpass_step(self._lp, log_now, inten01, dt_s, c.lowpass_cutoff_hz)
+            level = self._lp
+        if c.has_leak:
+            self._leak_offset += self._leak_rates_hz * self.c_pos * dt_s
+            level = level + self._leak_offset
+        noise = self._no_noise
+        if not c.is_noise_free:
+            shot_on = shot_off = None
+            if c.has_shot_noise:
+                shot_on = pixel.shot_noise_rates_hz(inten01, c.shot_noise_rate_hz, c.pos_threshold, self.c_pos)
+                shot_off = pixel.shot_noise_rates_hz(inten01, c.shot_noise_rate_hz, c.neg_threshold, self.c_neg)
+            noise = draw_noise_events(self._noise_rng, self.t_prev_us, t_us, shot_on, shot_off,
+                                      self.hot_pixels, c.hot_pixel_rate_hz, self.n_pixels)
+        events = self._emit(self._level, level, self._base, self._t_ready, self.c_pos, self.c_neg,
+                            self.t_prev_us, t_us, c.refractory_us, *noise, self.width, **self._emit_kwargs)
+        self._level = level
+        self.t_prev_us = t_us
+        self.n_frames += 1
+        return events
+
+    def _init_state(self, log_now: np.ndarray) -> None:
+        c = self.config
+        self._lp = log_now.copy() if c.has_lowpass else None
+        self._leak_offset = np.zeros(self.n_pixels) if c.has_leak else None
+        self._level = log_now  # input level at the previous frame (after low-pass and leak)
+        self._base = log_now.copy()
+        if c.has_leak:
+            self._base -= self._leak_phase * self.c_pos
+        self._t_ready = np.full(self.n_pixels, _NEVER_US, np.int64)
+
+
+def simulate(frames: Iterable[np.ndarray], t_us: Sequence[int], config: SimulatorConfig | None = None,
+             seed: int = 0, backend: str = "fast") -> EventStream:
+    """Simulate a whole frame sequence ([N,H,W] array or iterable of frames) into one EventStream."""
+    config = config or SimulatorConfig()
+    t_us = list(t_us)
+    sim = None
+    chunks = []
+    n = 0
+    for n, frame in enumerate(frames):
+        if n >= len(t_us):
+            raise FrameError(f"frame {n} has no timestamp: {len(t_us)} timestamps given")
+        frame = np.asarray(frame)
+        if sim is None:
+            sim = EventSimulator(config, frame.shape[1], frame.shape[0], seed=seed, backend=backend)
+        chunks.append(sim.push(frame, t_us[n]))
+    if sim is None:
+        raise FrameError("simulate: no frames given")
+    if n + 1 != len(t_us):
+        raise FrameError(f"simulate: {n + 1} frames but {len(t_us)} timestamps")
+    return EventStream(np.concatenate(chunks), sim.width, sim.height)

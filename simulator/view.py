@@ -1,0 +1,79 @@
+"""Pictures of events: an event frame (ON and OFF in two colours) and a sliding-window video."""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from e4dgs.fileio import atomic_output
+from simulator.events import EventStream
+
+ON_RGB = np.array([220, 40, 40], np.float64)    # red
+OFF_RGB = np.array([40, 80, 230], np.float64)   # blue
+BACKGROUND_RGB = np.array([255, 255, 255], np.float64)
+
+_TIME_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(us|ms|s)?\s*$")
+
+
+def parse_time_us(text: str) -> int:
+    """'1500', '1500us', '1.5ms', '0.0015s' -> 1500 (integer microseconds)."""
+    m = _TIME_RE.match(str(text))
+    if not m:
+        raise ValueError(f"cannot read time {text!r}: expected a number with optional unit us, ms or s")
+    scale = {"us": 1, None: 1, "ms": 1_000, "s": 1_000_000}[m.group(2)]
+    return int(round(float(m.group(1)) * scale))
+
+
+def event_frame(stream: EventStream, saturate_count: int = 3) -> np.ndarray:
+    """RGB uint8 [H,W,3]: white background, ON events red, OFF blue, mixed pixels blended.
+
+    Colour strength grows with the event count and saturates at `saturate_count` events.
+    """
+    H, W = stream.height, stream.width
+    ev = stream.events
+    idx = ev["y"].astype(np.int64) * W + ev["x"]
+    on = np.bincount(idx[ev["p"] > 0], minlength=H * W).reshape(H, W).astype(np.float64)
+    off = np.bincount(idx[ev["p"] < 0], minlength=H * W).reshape(H, W).astype(np.float64)
+    total = on + off
+    strength = np.minimum(total / max(saturate_count, 1), 1.0)[..., None]
+    frac_on = np.divide(on, total, out=np.zeros_like(on), where=total > 0)[..., None]
+    colour = frac_on * ON_RGB + (1.0 - frac_on) * OFF_RGB
+    img = (1.0 - strength) * BACKGROUND_RGB + strength * colour
+    return np.round(img).astype(np.uint8)
+
+
+def save_png(path: str | os.PathLike, rgb: np.ndarray) -> Path:
+    import cv2
+
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        ok, buf = cv2.imencode(".png", rgb[..., ::-1])
+        if not ok:
+            raise ValueError(f"{path}: PNG encoding failed")
+        tmp.write_bytes(buf.tobytes())
+    return path
+
+
+def save_video(path: str | os.PathLike, frames: list[np.ndarray] | np.ndarray, fps: float = 30.0) -> Path:
+    """Write RGB uint8 frames to an MP4 (mp4v) file atomically."""
+    import cv2
+
+    path = Path(path)
+    if len(frames) == 0:
+        raise ValueError(f"{path}: no frames to write")
+    h, w = frames[0].shape[:2]
+    with atomic_output(path) as tmp:
+        # cv2 picks the container from the extension, so the temporary name keeps it.
+        tmp_mp4 = tmp.with_name(tmp.name + path.suffix)
+        writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+        if not writer.isOpened():
+            raise RuntimeError(f"{path}: OpenCV cannot open an MP4 writer")
+        try:
+            for f in frames:
+                writer.write(np.ascontiguousarray(f[..., ::-1]))
+        finally:
+            writer.release()
+        os.replace(tmp_mp4, tmp)
+    return path
