@@ -11,7 +11,7 @@ from e4dgs.fileio import atomic_output
 from simulator.events import EventStream
 
 ON_RGB = np.array([220, 40, 40], np.float64)    # red
-OFF_RGB = np.array([40, 80, 230], np.float64)   # blue
+OFF_RGB = np.array([40, 80, 220], np.float64)   # blue (mirror of ON, so a tie is neutral)
 BACKGROUND_RGB = np.array([255, 255, 255], np.float64)
 
 _TIME_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(us|ms|s)?\s*$")

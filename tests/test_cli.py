@@ -1,0 +1,99 @@
+"""`e4dgs simulate` and `e4dgs view` end to end on small image folders."""
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from e4dgs.cli import main
+from e4dgs.imageio import write_exr
+from simulator import SimulatorConfig, simulate
+from simulator.h5io import read_events, read_info
+from simulator.pixel import srgb_to_linear
+
+
+def grating_frames(n=12, h=24, w=32):
+    x = np.arange(w)[None, :] + 0 * np.arange(h)[:, None]
+    return [(0.05 + 0.9 * (0.5 + 0.5 * np.sin(2 * np.pi * (x - k) / 12))).astype(np.float32) for k in range(n)]
+
+
+@pytest.fixture
+def exr_dir(tmp_path):
+    d = tmp_path / "exr"
+    for k, f in enumerate(grating_frames()):
+        write_exr(d / f"frame_{k:03d}.exr", f)
+    return d
+
+
+def test_simulate_exr_folder_matches_the_python_api(exr_dir, tmp_path):
+    out = tmp_path / "ev.h5"
+    assert main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out)]) == 0
+    expected = simulate(grating_frames(), [round(k * 1e6 / 3000) for k in range(12)], SimulatorConfig())
+    got = read_events(out)
+    assert len(got) > 0 and np.array_equal(got.events, expected.events)
+    info = read_info(out)
+    assert info["sim_pos_threshold"] == 0.2 and info["width"] == 32 and "simulator_config" in info
+
+
+def test_simulate_png_folder_with_timestamps_and_config(tmp_path):
+    d = tmp_path / "png"
+    d.mkdir()
+    frames = grating_frames(n=6)
+    for k, f in enumerate(frames):
+        cv2.imwrite(str(d / f"{k:02d}.png"), np.round(f * 255).astype(np.uint8))
+    ts = tmp_path / "t.txt"
+    ts.write_text("# us\n100\n200\n450\n700\n1000\n1600\n")
+    cfg = tmp_path / "sim.yaml"
+    cfg.write_text("pos_threshold: 0.3\nneg_threshold: 0.3\nrefractory_us: 20\n")
+    out = tmp_path / "ev.h5"
+    main(["simulate", "--frames", str(d), "--timestamps", str(ts), "--out", str(out), "--config", str(cfg)])
+    linear = [srgb_to_linear(np.round(f * 255) / 255) for f in frames]
+    expected = simulate(linear, [100, 200, 450, 700, 1000, 1600], SimulatorConfig(pos_threshold=0.3, neg_threshold=0.3, refractory_us=20))
+    assert np.array_equal(read_events(out).events, expected.events)
+    assert read_info(out)["t_offset_us"] == 100
+
+
+def test_simulate_errors_are_clear_and_write_nothing(exr_dir, tmp_path):
+    out = tmp_path / "ev.h5"
+    bad_cfg = tmp_path / "bad.yaml"
+    bad_cfg.write_text("threshold: 0.2\n")
+    with pytest.raises(SystemExit, match="threshold: unknown key"):
+        main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out), "--config", str(bad_cfg)])
+    ts = tmp_path / "t.txt"
+    ts.write_text("1\n2\n")
+    with pytest.raises(SystemExit, match="2 timestamps for 12 frames"):
+        main(["simulate", "--frames", str(exr_dir), "--timestamps", str(ts), "--out", str(out)])
+    write_exr(exr_dir / "frame_999.exr", np.ones((5, 5), np.float32))  # wrong size, last in order
+    with pytest.raises(SystemExit, match="frame_999.exr.*does not match the sensor"):
+        main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out)])
+    assert not out.exists() and not any(p.name.endswith(".tmp") for p in tmp_path.iterdir())
+
+
+def test_view_png_and_mp4(exr_dir, tmp_path):
+    ev = tmp_path / "ev.h5"
+    main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(ev)])
+    png = tmp_path / "p.png"
+    main(["view", str(ev), "--t0", "1ms", "--t1", "2ms", "--out", str(png)])
+    img = cv2.imread(str(png))[..., ::-1]
+    assert img.shape == (24, 32, 3)
+    events = read_events(ev).window(1000, 2000).events
+    idx = events["y"].astype(int) * 32 + events["x"]
+    n_on = np.bincount(idx[events["p"] > 0], minlength=24 * 32).reshape(24, 32)
+    n_off = np.bincount(idx[events["p"] < 0], minlength=24 * 32).reshape(24, 32)
+    r, b = img[..., 0].astype(int), img[..., 2].astype(int)
+    assert np.array_equal(r > b, n_on > n_off) and np.array_equal(b > r, n_off > n_on)
+    assert np.all(img[(n_on + n_off) == 0] == 255) and np.all(img[(n_on + n_off) > 0].min(axis=-1) < 255)
+    mp4 = tmp_path / "c.mp4"
+    main(["view", str(ev), "--window", "0.5ms", "--out", str(mp4)])
+    cap = cv2.VideoCapture(str(mp4))
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    cap.release()
+    assert n == 7  # windows starting at 0, 0.5, ..., 3.0 ms within the 3.667 ms stream
+    with pytest.raises(SystemExit, match="expected a .png or .mp4"):
+        main(["view", str(ev), "--out", str(tmp_path / "x.gif")])
+
+
+def test_console_entry_point_is_installed():
+    r = subprocess.run([sys.executable, "-m", "e4dgs", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "simulate" in r.stdout and "view" in r.stdout

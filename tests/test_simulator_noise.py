@@ -1,0 +1,110 @@
+"""Noise stages: rates within Poisson bounds, refractory period, seeding, and zero cost when off."""
+import numpy as np
+import pytest
+
+from simulator import EventSimulator, SimulatorConfig, simulate
+from simulator import simulator as simulator_module
+from simulator.pixel import SHOT_NOISE_WHITE_FACTOR, intensity01
+from tests.conftest import frame_from_log
+
+
+def static_run(config, intensity, h=20, w=25, seconds=1.0, n_frames=101, seed=3):
+    frames = np.full((n_frames, h, w), intensity)
+    t = np.round(np.linspace(0, seconds * 1e6, n_frames)).astype(np.int64)
+    return simulate(frames, t, config, seed=seed).events
+
+
+def within_poisson(count, mean, k=5.0):
+    return abs(count - mean) <= k * np.sqrt(mean) + 1
+
+
+@pytest.mark.parametrize("intensity", [0.0, 0.5, 1.0])
+def test_shot_noise_counts_match_the_configured_rate(intensity):
+    rate = 40.0
+    ev = static_run(SimulatorConfig(shot_noise_rate_hz=rate), intensity)
+    w = min(float(intensity01(np.array(intensity))), 1.0)
+    per_polarity = 0.5 * rate * ((SHOT_NOISE_WHITE_FACTOR - 1) * w + 1) * 500 * 1.0
+    assert within_poisson(np.sum(ev["p"] == 1), per_polarity)
+    assert within_poisson(np.sum(ev["p"] == -1), per_polarity)
+    # static scene: shot noise must not leave the pixels' references moved (no follow-up events)
+    assert len(ev) < 2.5 * per_polarity
+
+
+def test_leak_events_are_on_events_at_the_leak_rate():
+    rate = 8.0
+    ev = static_run(SimulatorConfig(leak_rate_hz=rate, leak_rate_sigma_decades=0.0), 0.3)
+    assert np.all(ev["p"] == 1)
+    assert within_poisson(len(ev), rate * 500 * 1.0)
+
+
+def test_hot_pixels_fire_on_events_only_at_hot_pixels():
+    cfg = SimulatorConfig(hot_pixel_fraction=0.02, hot_pixel_rate_hz=300.0)
+    ev = static_run(cfg, 0.3)
+    sim = EventSimulator(cfg, 25, 20, seed=3)
+    hot = set(sim.hot_pixels.tolist())
+    assert len(hot) == 10
+    assert {int(y) * 25 + int(x) for x, y in zip(ev["x"], ev["y"])} <= hot
+    assert np.all(ev["p"] == 1) and within_poisson(len(ev), 10 * 300.0)
+
+
+@pytest.mark.parametrize("extra", [{}, dict(shot_noise_rate_hz=2000.0, hot_pixel_fraction=0.1, hot_pixel_rate_hz=5000.0)])
+def test_refractory_period_is_never_violated(extra, rng):
+    R = 250
+    frames = np.exp(np.cumsum(rng.normal(0, 0.8, size=(40, 9, 10)), axis=0))
+    t = np.cumsum(rng.integers(20, 400, size=40))
+    ev = simulate(frames, t, SimulatorConfig(refractory_us=R, **extra)).events
+    pix = ev["y"].astype(np.int64) * 10 + ev["x"]
+    order = np.lexsort((ev["t"], pix))
+    same = pix[order][1:] == pix[order][:-1]
+    gaps = np.diff(ev["t"][order])[same]
+    assert len(gaps) > 100 and gaps.min() >= R
+    # and the refractory period does remove events
+    assert len(ev) < len(simulate(frames, t, SimulatorConfig(**extra)))
+
+
+def test_disabled_effects_reproduce_the_noise_free_output(rng, monkeypatch):
+    frames = np.exp(np.cumsum(rng.normal(0, 0.5, size=(20, 8, 9)), axis=0))
+    t = np.arange(20) * 333
+    ideal = simulate(frames, t, SimulatorConfig()).events
+    # every effect present in the config but switched off (zero rate / fraction / cutoff / period)
+    off = SimulatorConfig(leak_rate_hz=0.0, leak_rate_sigma_decades=1.0, hot_pixel_fraction=0.3,
+                          hot_pixel_rate_hz=0.0, shot_noise_rate_hz=0.0, lowpass_cutoff_hz=0.0,
+                          refractory_us=0, threshold_sigma=0.0)
+    called = []
+    monkeypatch.setattr(simulator_module, "draw_noise_events", lambda *a, **k: called.append(1))
+    assert np.array_equal(simulate(frames, t, off, seed=99).events, ideal)
+    assert not called  # disabled noise stages are not even run
+
+
+def test_seeded_noise_is_reproducible():
+    cfg = SimulatorConfig(shot_noise_rate_hz=300.0, threshold_sigma=0.05, hot_pixel_fraction=0.05, hot_pixel_rate_hz=100.0)
+    a = static_run(cfg, 0.2, seed=5)
+    b = static_run(cfg, 0.2, seed=5)
+    c = static_run(cfg, 0.2, seed=6)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+def test_threshold_mismatch_is_clamped_and_spreads_counts():
+    cfg = SimulatorConfig(threshold_sigma=0.2, threshold_min=0.05)
+    sim = EventSimulator(cfg, 50, 40, seed=0)
+    assert sim.c_pos.min() >= 0.05 and sim.c_neg.min() >= 0.05
+    assert abs(np.median(sim.c_pos) - 0.2) < 0.03
+    frames = np.stack([frame_from_log(np.full((40, 50), -2.0)), frame_from_log(np.full((40, 50), -1.0))])
+    ev = simulate(frames, [0, 1000], cfg).events
+    counts = np.bincount(ev["y"].astype(int) * 50 + ev["x"], minlength=2000)
+    # each pixel: one log unit up -> floor(1 / its own C+) events
+    assert np.array_equal(counts, np.floor(1.0 / sim.c_pos + 1e-9).astype(int))
+    assert counts.std() > 0
+
+
+def test_lowpass_delays_and_smooths_the_response():
+    # a step in the dark is followed more slowly than in the light
+    frames = np.concatenate([np.full((1, 1, 2), [[0.01, 1.0]]), np.full((60, 1, 2), [[0.01 * np.e**1.1, np.e**1.1]])])
+    t = np.arange(61) * 100
+    ev = simulate(frames, t, SimulatorConfig(lowpass_cutoff_hz=100.0)).events
+    first_dark = ev["t"][ev["x"] == 0]
+    first_bright = ev["t"][ev["x"] == 1]
+    assert len(first_bright) == 5 and len(first_dark) >= 1
+    assert first_dark.min() > first_bright.min()
+    ideal = simulate(frames, t, SimulatorConfig()).events
+    assert np.all(ideal["t"] <= 100)  # without the filter the step lands within one interval
