@@ -4,8 +4,10 @@ Only the way the work is done differs from the reference; the arithmetic is the 
 operation (no fastmath), so the events are bit-identical:
 
 - pixels are split into contiguous chunks that run in parallel (numba threads; one chunk per
-  thread), each writing events into its own reusable buffer as packed 64-bit keys
-  (time offset << 32 | pixel << 1 | polarity bit);
+  thread; with one thread the serial twins run, without numba's parallel launch cost), each writing
+  events into its own reusable buffer as packed 64-bit keys
+  (time offset << 32 | y << 17 | x << 1 | polarity bit: sorting keys by their high half orders
+  events by time, and equal times keep row-major pixel order);
 - a chunk that would overflow its buffer stops at a pixel boundary (an upper bound on a pixel's
   events is checked before it is processed) and is resumed after the buffer has grown, so no
   pixel state is ever half-updated;
@@ -45,7 +47,7 @@ def _room_for(n, cap, a_minus_level, inv_c):
 
 
 @_jit
-def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, i_begin, i_end, keys, n):
+def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, width, i_begin, i_end, keys, n):
     """Threshold crossings only (no refractory period, no noise) for pixels [i_begin, i_end).
 
     Appends keys from index n. Returns (n, i_stop); i_stop < i_end means the buffer is too small
@@ -57,6 +59,8 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, i_begin, i_end, keys, 
     cp = c_pos[0]
     cn = c_neg[0]
     inv_c = 1.0 / min(cp, cn)
+    y = i_begin // width
+    x = i_begin - y * width
     for i in range(i_begin, i_end):
         if not uniform:
             cp = c_pos[i]
@@ -67,6 +71,11 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, i_begin, i_end, keys, 
         level = base[i]
         if not _room_for(n, cap, b - level, inv_c):
             return n, i
+        yx = (y << 17) | (x << 1)
+        x += 1
+        if x == width:
+            x = 0
+            y += 1
         slope = b - a
         if slope > 0.0:
             target = level + cp
@@ -76,7 +85,7 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, i_begin, i_end, keys, 
                 while target <= b + CROSS_TOL:
                     s = min(max((target - a) * scale, s_now), Df)
                     o = max(int(math.floor(s + 0.5)), 1)
-                    keys[n] = (o << 32) | (i << 1) | 1
+                    keys[n] = (o << 32) | yx | 1
                     n += 1
                     level = target
                     s_now = s
@@ -90,7 +99,7 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, i_begin, i_end, keys, 
                 while target >= b - CROSS_TOL:
                     s = min(max((target - a) * scale, s_now), Df)
                     o = max(int(math.floor(s + 0.5)), 1)
-                    keys[n] = (o << 32) | (i << 1)
+                    keys[n] = (o << 32) | yx
                     n += 1
                     level = target
                     s_now = s
@@ -101,7 +110,7 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, i_begin, i_end, keys, 
 
 @_jit
 def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
-                  i_begin, i_end, keys, n):
+                  width, i_begin, i_end, keys, n):
     """Crossings with refractory period and noise events, for pixels [i_begin, i_end).
 
     Same contract as `_emit_clean`; the logic is the reference's, step for step.
@@ -115,6 +124,8 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pt
     inv_c = 1.0 / min(cp, cn)
     max_refractory_events = (D - 1) // R + 1 if R > 0 else 0
     for i in range(i_begin, i_end):
+        y = i // width
+        yx = (y << 17) | ((i - y * width) << 1)
         if not uniform:
             cp = c_pos[i]
             cn = c_neg[i]
@@ -170,7 +181,7 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pt
                 on = p_cross > 0
                 level = target
                 s_now = s_cross
-            keys[n] = (o << 32) | (i << 1) | (1 if on else 0)
+            keys[n] = (o << 32) | yx | (1 if on else 0)
             n += 1
             if R > 0:
                 t_ready[i] = t0_us + o + R
@@ -180,71 +191,103 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pt
     return n, i_end
 
 
-@_pjit
-def _emit_all(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
-              clean, starts, stops, keys, counts):
-    """Run every unfinished chunk c from starts[c] to stops[c]; counts[c] and starts[c] advance."""
-    for cu in numba.prange(starts.shape[0]):
-        c = np.int64(cu)  # prange indices are unsigned; typed-list indexing wants int64
-        if starts[c] < stops[c]:
-            if clean:
-                n, i_stop = _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, starts[c], stops[c],
-                                        keys[c], counts[c])
-            else:
-                n, i_stop = _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R,
-                                          noise_ptr, noise_t, noise_p, starts[c], stops[c], keys[c],
-                                          counts[c])
-            counts[c] = n
-            starts[c] = i_stop
+@_jit
+def _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+                clean, width, starts, stops, keys, counts, c):
+    """Continue chunk c from starts[c] to stops[c]; counts[c] and starts[c] advance."""
+    if starts[c] < stops[c]:
+        if clean:
+            n, i_stop = _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, width, starts[c], stops[c],
+                                    keys[c], counts[c])
+        else:
+            n, i_stop = _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr,
+                                      noise_t, noise_p, width, starts[c], stops[c], keys[c], counts[c])
+        counts[c] = n
+        starts[c] = i_stop
 
 
 @_jit
-def _decode(keys, j0, j1, t0_us, width, out):
-    inv_w = 1.0 / width
+def _emit_serial(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+                 clean, width, starts, stops, keys, counts):
+    for c in range(starts.shape[0]):
+        _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+                    clean, width, starts, stops, keys, counts, c)
+
+
+@_pjit
+def _emit_parallel(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+                   clean, width, starts, stops, keys, counts):
+    for cu in numba.prange(starts.shape[0]):
+        _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+                    clean, width, starts, stops, keys, counts, np.int64(cu))  # prange index is unsigned
+
+
+@_jit
+def _decode(keys, j0, j1, t0_us, out):
+    """Packed keys [j0, j1) -> EVENT_DTYPE records at the same positions."""
     for j in range(j0, j1):
         key = keys[j]
-        i = (key >> 1) & 0x7FFFFFFF
-        y = int((i + 0.5) * inv_w)
         r = out[j]
         r.t = t0_us + (key >> 32)
-        r.x = i - y * width
-        r.y = y
+        r.x = (key >> 1) & 0xFFFF
+        r.y = (key >> 17) & 0x7FFF
         r.p = 1 if key & 1 else -1
 
 
-@_pjit
-def _sort_counting(keys, counts, hists, sorted_keys, t0_us, width, out):
-    """Counting sort of all chunks' keys by time offset, then decode into `out`."""
-    n_chunks = counts.shape[0]
-    n_bins = hists.shape[1]
-    for cu in numba.prange(n_chunks):
-        c = np.int64(cu)
-        kc = keys[c]
-        h = hists[c]
-        for j in range(counts[c]):
-            h[kc[j] >> 32] += 1
-    acc = 0
-    for v in range(n_bins):  # exclusive prefix over (time, chunk)
-        for c in range(n_chunks):
-            h = hists[c, v]
-            hists[c, v] = acc
-            acc += h
-    for cu in numba.prange(n_chunks):
-        c = np.int64(cu)
-        kc = keys[c]
-        pos = hists[c]
-        for j in range(counts[c]):
-            key = kc[j]
-            o = key >> 32
-            sorted_keys[pos[o]] = key
-            pos[o] += 1
-    total = out.shape[0]
-    for c in numba.prange(n_chunks):
-        _decode(sorted_keys, total * c // n_chunks, total * (c + 1) // n_chunks, t0_us, width, out)
+@_jit
+def _histogram(keys, n, hist):
+    for j in range(n):
+        hist[keys[j] >> 32] += 1
 
 
 @_jit
-def _sort_merge(keys, counts, t0_us, width, out):
+def _prefix_over_time_then_chunk(hists):
+    """Exclusive prefix sum in (time bin, chunk) order: where each chunk's events of a bin start."""
+    acc = 0
+    for v in range(hists.shape[1]):
+        for c in range(hists.shape[0]):
+            h = hists[c, v]
+            hists[c, v] = acc
+            acc += h
+
+
+@_jit
+def _scatter(keys, n, pos, sorted_keys):
+    for j in range(n):
+        key = keys[j]
+        o = key >> 32
+        sorted_keys[pos[o]] = key
+        pos[o] += 1
+
+
+@_jit
+def _sort_counting_serial(keys, counts, hists, sorted_keys, t0_us, out):
+    for c in range(counts.shape[0]):
+        _histogram(keys[c], counts[c], hists[c])
+    _prefix_over_time_then_chunk(hists)
+    for c in range(counts.shape[0]):
+        _scatter(keys[c], counts[c], hists[c], sorted_keys)
+    _decode(sorted_keys, 0, out.shape[0], t0_us, out)
+
+
+@_pjit
+def _sort_counting_parallel(keys, counts, hists, sorted_keys, t0_us, out):
+    n_chunks = counts.shape[0]
+    for cu in numba.prange(n_chunks):
+        c = np.int64(cu)
+        _histogram(keys[c], counts[c], hists[c])
+    _prefix_over_time_then_chunk(hists)
+    for cu in numba.prange(n_chunks):
+        c = np.int64(cu)
+        _scatter(keys[c], counts[c], hists[c], sorted_keys)
+    total = out.shape[0]
+    for cu in numba.prange(n_chunks):
+        c = np.int64(cu)
+        _decode(sorted_keys, total * c // n_chunks, total * (c + 1) // n_chunks, t0_us, out)
+
+
+@_jit
+def _sort_merge(keys, counts, t0_us, out):
     """Stable merge sort of the keys by time offset (long intervals with few events)."""
     total = out.shape[0]
     all_keys = np.empty(total, np.int64)
@@ -253,7 +296,7 @@ def _sort_merge(keys, counts, t0_us, width, out):
         all_keys[j0:j0 + counts[c]] = keys[c][:counts[c]]
         j0 += counts[c]
     order = np.argsort(all_keys >> 32, kind="mergesort")
-    _decode(all_keys[order], 0, total, t0_us, width, out)
+    _decode(all_keys[order], 0, total, t0_us, out)
 
 
 class Workspace:
@@ -298,14 +341,18 @@ def emit_events(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractory_us
     D = t1_us - t0_us
     if D > _MAX_OFFSET:
         raise ValueError(f"frame interval of {D} us is longer than the supported {_MAX_OFFSET} us")
+    if width > 0xFFFF or L0.shape[0] // max(width, 1) > 0x7FFF:
+        raise ValueError(f"sensor too large for packed event keys: width <= 65535 and height <= 32767")
+    parallel = ws.n_chunks > 1
     P = L0.shape[0]
     bounds = np.linspace(0, P, ws.n_chunks + 1).astype(np.int64)
     starts, stops = bounds[:-1].copy(), bounds[1:].copy()
     counts = np.zeros(ws.n_chunks, np.int64)
     clean = R == 0 and noise_t.shape[0] == 0
     while True:
-        _emit_all(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
-                  clean, starts, stops, ws.keys, counts)
+        (_emit_parallel if parallel else _emit_serial)(
+            L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+            clean, width, starts, stops, ws.keys, counts)
         if np.all(starts >= stops):
             break
         ws.grow(counts)
@@ -315,7 +362,8 @@ def emit_events(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractory_us
         hists = ws.histograms(D + 1)
         if ws.sorted_keys.shape[0] < total:
             ws.sorted_keys = np.empty(max(total, 2 * ws.sorted_keys.shape[0]), np.int64)
-        _sort_counting(ws.keys, counts, hists, ws.sorted_keys, t0_us, width, out)
+        sort = _sort_counting_parallel if parallel else _sort_counting_serial
+        sort(ws.keys, counts, hists, ws.sorted_keys, t0_us, out)
     else:
-        _sort_merge(ws.keys, counts, t0_us, width, out)
+        _sort_merge(ws.keys, counts, t0_us, out)
     return out
