@@ -30,14 +30,14 @@ CROSS_TOL = 1e-9
 
 
 def emit_events_ref(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractory_us,
-                    noise_ptr, noise_t, noise_p, width):
+                    noise_pix, noise_t, noise_p, width):
     """Events of one frame interval. Updates `base` [P] and `t_ready` [P] in place.
 
     L0, L1 [P] float64: log intensity at t0_us and t1_us. base [P] float64: reference levels.
     t_ready [P] int64: end of each pixel's refractory period. c_pos, c_neg [P] or [1] float64:
     per-pixel thresholds, or one threshold for all pixels.
-    noise_ptr [P+1] int64, noise_t [M] int64 (in (t0, t1], sorted per pixel), noise_p [M] int8:
-    noise events of pixel i are noise_t[noise_ptr[i]:noise_ptr[i+1]].
+    noise_pix [M] int64, noise_t [M] int64 (in (t0, t1]), noise_p [M] int8: noise events sorted by
+    (pixel, time).
     Returns the events [K] (EVENT_DTYPE) sorted by t; equal t keep pixel order (row-major), then
     each pixel's own order.
     """
@@ -51,7 +51,7 @@ def emit_events_ref(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractor
         slope = b - a
         scale = D / slope if slope != 0.0 else 0.0
         level = float(base[i])
-        k, k_end = int(noise_ptr[i]), int(noise_ptr[i + 1])
+        k, k_end = (int(v) for v in np.searchsorted(noise_pix, [i, i + 1]))
         s_now = 0.0
         refractory_end = int(t_ready[i]) - t0_us  # offset in us; <= 0: not refractory
         blind = R > 0 and refractory_end > 0

@@ -109,7 +109,7 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, width, i_begin, i_end,
 
 
 @_jit
-def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
                   width, i_begin, i_end, keys, n):
     """Crossings with refractory period and noise events, for pixels [i_begin, i_end).
 
@@ -123,9 +123,16 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pt
     cn = c_neg[0]
     inv_c = 1.0 / min(cp, cn)
     max_refractory_events = (D - 1) // R + 1 if R > 0 else 0
+    M = noise_pix.shape[0]
+    k_end = np.searchsorted(noise_pix, i_begin)  # cursor into the (pixel, time)-sorted noise events
+    y = i_begin // width
+    x = i_begin - y * width
     for i in range(i_begin, i_end):
-        y = i // width
-        yx = (y << 17) | ((i - y * width) << 1)
+        yx = (y << 17) | (x << 1)
+        x += 1
+        if x == width:
+            x = 0
+            y += 1
         if not uniform:
             cp = c_pos[i]
             cn = c_neg[i]
@@ -133,14 +140,15 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pt
         a = float(L0[i])
         b = float(L1[i])
         level = base[i]
-        k = noise_ptr[i]
-        k_end = noise_ptr[i + 1]
+        k = k_end
+        while k_end < M and noise_pix[k_end] == i:
+            k_end += 1
         # upper bound on this pixel's events, so the buffer never overflows mid-pixel
         if R > 0:
             if n + max_refractory_events > cap:
                 return n, i
         elif n + (k_end - k) > cap or not _room_for(n + (k_end - k), cap, b - level, inv_c):
-            return n, i
+            return n, i  # (pixel i is resumed from scratch: its noise cursor is found again)
         slope = b - a
         scale = Df / slope if slope != 0.0 else 0.0
         refractory_end = t_ready[i] - t0_us if R > 0 else 0
@@ -192,7 +200,7 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pt
 
 
 @_jit
-def _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+def _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
                 clean, width, starts, stops, keys, counts, c):
     """Continue chunk c from starts[c] to stops[c]; counts[c] and starts[c] advance."""
     if starts[c] < stops[c]:
@@ -200,25 +208,25 @@ def _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr,
             n, i_stop = _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, width, starts[c], stops[c],
                                     keys[c], counts[c])
         else:
-            n, i_stop = _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr,
+            n, i_stop = _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix,
                                       noise_t, noise_p, width, starts[c], stops[c], keys[c], counts[c])
         counts[c] = n
         starts[c] = i_stop
 
 
 @_jit
-def _emit_serial(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+def _emit_serial(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
                  clean, width, starts, stops, keys, counts):
     for c in range(starts.shape[0]):
-        _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+        _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
                     clean, width, starts, stops, keys, counts, c)
 
 
 @_pjit
-def _emit_parallel(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+def _emit_parallel(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
                    clean, width, starts, stops, keys, counts):
     for cu in numba.prange(starts.shape[0]):
-        _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+        _emit_chunk(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
                     clean, width, starts, stops, keys, counts, np.int64(cu))  # prange index is unsigned
 
 
@@ -331,7 +339,7 @@ class Workspace:
 
 
 def emit_events(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractory_us,
-                noise_ptr, noise_t, noise_p, width, workspace: Workspace | None = None):
+                noise_pix, noise_t, noise_p, width, workspace: Workspace | None = None):
     """Fast twin of `simulator.kernel_ref.emit_events_ref` (same arguments, same result).
 
     `workspace` keeps buffers between calls (the simulator passes one; optional here).
@@ -351,7 +359,7 @@ def emit_events(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractory_us
     clean = R == 0 and noise_t.shape[0] == 0
     while True:
         (_emit_parallel if parallel else _emit_serial)(
-            L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_ptr, noise_t, noise_p,
+            L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pix, noise_t, noise_p,
             clean, width, starts, stops, ws.keys, counts)
         if np.all(starts >= stops):
             break

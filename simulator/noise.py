@@ -1,59 +1,71 @@
-"""Random event sources (shot noise, hot pixels) drawn per frame interval as per-pixel lists.
+"""Random event sources (shot noise, hot pixels), drawn per frame interval in O(events).
 
-Both are Poisson processes in continuous time, drawn in O(events) rather than O(pixels): candidates
-are drawn at the largest per-pixel rate and thinned to each pixel's rate (Lewis-Shedler), which is
-exact for any rate map. Timestamps are uniform integer microseconds in (t0, t1].
-The result is CSR: events of pixel i are t[ptr[i]:ptr[i+1]] (sorted), p likewise.
+Both are Poisson processes in continuous time. Shot noise has a per-pixel rate that depends on
+the pixel's intensity; it is drawn by thinning (Lewis-Shedler): candidates at an upper bound of
+the rate, each kept with probability rate / bound, which is exact for any rate map and needs the
+intensity only at the candidates. Timestamps are uniform integer microseconds in (t0, t1].
+Result: (pix [M], t [M], p [M]) sorted by (pixel, time), the kernels' noise input.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from simulator.pixel import shot_noise_rates_hz
 
-def draw_thinned(rng: np.random.Generator, rates_hz: np.ndarray, dt_s: float) -> np.ndarray:
-    """Pixel indices of events of independent Poisson processes with rates [P] over dt_s seconds.
+NO_NOISE = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int8))
 
-    Each pixel i gets Poisson(rates_hz[i] * dt_s) events (returned as repeated indices, unsorted).
+
+def draw_thinned(rng: np.random.Generator, n_pixels: int, rate_bound_hz: float, dt_s: float, rate_at) -> np.ndarray:
+    """Pixel indices of Poisson events with per-pixel rates `rate_at(pix)` <= rate_bound_hz over dt_s.
+
+    Each pixel i gets Poisson(rate_at(i) * dt_s) events (repeated indices, unsorted).
     """
-    P = rates_hz.shape[0]
-    r_max = float(rates_hz.max()) if P else 0.0
-    if r_max <= 0.0 or dt_s <= 0.0:
+    if rate_bound_hz <= 0.0 or dt_s <= 0.0 or n_pixels == 0:
         return np.empty(0, np.int64)
-    n = rng.poisson(r_max * dt_s * P)
-    cand = rng.integers(0, P, size=n)
-    keep = rng.random(n) * r_max < rates_hz[cand]
+    n = rng.poisson(rate_bound_hz * dt_s * n_pixels)
+    cand = rng.integers(0, n_pixels, size=n)
+    keep = rng.random(n) * rate_bound_hz < rate_at(cand)
     return cand[keep]
 
 
-def to_csr(pixels: np.ndarray, t_us: np.ndarray, p: np.ndarray, n_pixels: int):
-    """Group events by pixel, time-sorted within each pixel: (ptr [P+1], t [M], p [M])."""
-    order = np.lexsort((t_us, pixels))
-    ptr = np.zeros(n_pixels + 1, np.int64)
-    np.cumsum(np.bincount(pixels, minlength=n_pixels), out=ptr[1:])
-    return ptr, np.ascontiguousarray(t_us[order], np.int64), np.ascontiguousarray(p[order], np.int8)
+def sort_by_pixel_then_time(pix: np.ndarray, t_us: np.ndarray, p: np.ndarray):
+    order = np.lexsort((t_us, pix))
+    return (np.ascontiguousarray(pix[order], np.int64), np.ascontiguousarray(t_us[order], np.int64),
+            np.ascontiguousarray(p[order], np.int8))
 
 
-def draw_noise_events(rng: np.random.Generator, t0_us: int, t1_us: int,
-                      shot_rate_on_hz: np.ndarray | None, shot_rate_off_hz: np.ndarray | None,
-                      hot_pixels: np.ndarray | None, hot_rate_hz: float, n_pixels: int):
-    """Noise events of one interval as CSR (ptr [P+1], t [M], p [M]).
+def draw_noise_events(rng: np.random.Generator, t0_us: int, t1_us: int, n_pixels: int,
+                      intensity: np.ndarray | None, shot_rate_hz: float, c_nominal: tuple[float, float],
+                      c_pos: np.ndarray, c_neg: np.ndarray,
+                      hot_pixels: np.ndarray | None, hot_rate_hz: float):
+    """Noise events of one interval, sorted by (pixel, time).
 
-    shot_rate_on_hz / shot_rate_off_hz [P]: per-pixel shot-noise rates per polarity (None: off).
-    hot_pixels [H] pixel indices firing ON events at hot_rate_hz (None: off).
+    Shot noise (when shot_rate_hz > 0): v2e's per-polarity rate from `shot_noise_rates_hz` at the
+    pixel's linear intensity [P] and thresholds c_pos / c_neg ([P] or [1]); c_nominal = (C+, C-).
+    Hot pixels (when hot_pixels is given): ON events at hot_rate_hz at those pixel indices.
     """
     dt_s = (t1_us - t0_us) * 1e-6
     pix_parts, pol_parts = [], []
-    if shot_rate_on_hz is not None:
-        on = draw_thinned(rng, shot_rate_on_hz, dt_s)
-        off = draw_thinned(rng, shot_rate_off_hz, dt_s)
-        pix_parts += [on, off]
-        pol_parts += [np.ones(on.size, np.int8), np.full(off.size, -1, np.int8)]
-    if hot_pixels is not None and hot_pixels.size:
+    if shot_rate_hz > 0:
+        from simulator.pixel import intensity01
+
+        for pol, c_nom, c_pix in ((1, c_nominal[0], c_pos), (-1, c_nominal[1], c_neg)):
+            c_at = (lambda i, c=c_pix: c[0]) if c_pix.shape[0] == 1 else (lambda i, c=c_pix: c[i])
+            # rate is largest in the dark (factor 1) and at the smallest threshold
+            bound = shot_noise_rates_hz(np.zeros(1), shot_rate_hz, c_nom, np.array([c_pix.min()]))[0]
+            rate_at = lambda i, c_nom=c_nom, c_at=c_at: shot_noise_rates_hz(  # noqa: E731
+                intensity01(intensity[i]), shot_rate_hz, c_nom, c_at(i))
+            drawn = draw_thinned(rng, n_pixels, bound, dt_s, rate_at)
+            pix_parts.append(drawn)
+            pol_parts.append(np.full(drawn.size, pol, np.int8))
+    if hot_pixels is not None and hot_pixels.size and hot_rate_hz > 0:
         counts = rng.poisson(hot_rate_hz * dt_s, size=hot_pixels.size)
         hot = np.repeat(hot_pixels, counts)
         pix_parts.append(hot)
         pol_parts.append(np.ones(hot.size, np.int8))
-    pixels = np.concatenate(pix_parts) if pix_parts else np.empty(0, np.int64)
-    pols = np.concatenate(pol_parts) if pol_parts else np.empty(0, np.int8)
-    t_us = rng.integers(t0_us + 1, t1_us + 1, size=pixels.size, dtype=np.int64)
-    return to_csr(pixels, t_us, pols, n_pixels)
+    if not pix_parts:
+        return NO_NOISE
+    pix = np.concatenate(pix_parts)
+    pol = np.concatenate(pol_parts)
+    t_us = rng.integers(t0_us + 1, t1_us + 1, size=pix.size, dtype=np.int64)
+    return sort_by_pixel_then_time(pix, t_us, pol)

@@ -61,16 +61,26 @@ def intensity01(intensity: np.ndarray) -> np.ndarray:
     return (np.asarray(intensity, dtype=np.float64) * 255.0 + _INTEN_OFFSET_DN) / _INTEN_SCALE_DN
 
 
-def lowpass_step(lp_prev: np.ndarray, log_new: np.ndarray, inten01: np.ndarray, dt_s: float,
-                 cutoff_hz: float) -> np.ndarray:
-    """One step of v2e's intensity-dependent first-order photoreceptor filter.
+def lowpass_step(lp_prev: np.ndarray, log_new: np.ndarray, intensity: np.ndarray, dt_s: float,
+                 cutoff_hz: float, out: np.ndarray | None = None,
+                 scratch: np.ndarray | None = None) -> np.ndarray:
+    """One step of v2e's intensity-dependent first-order photoreceptor filter [P].
 
-    tau = 1 / (2 pi cutoff_hz); the update weight eps = inten01 * dt / tau is clamped to 1, so bright
-    pixels follow the input faster than dark ones. Returns the new filtered log intensity [P].
+    tau = 1 / (2 pi cutoff_hz); the update weight eps = intensity01(I) * dt / tau is clamped to 1,
+    so bright pixels follow the input faster than dark ones. `out` may be `lp_prev` (in place);
+    `scratch` [P] float64 avoids temporaries.
     """
-    tau_s = 1.0 / (2.0 * math.pi * cutoff_hz)
-    eps = np.minimum(inten01 * (dt_s / tau_s), 1.0)
-    return lp_prev + eps * (log_new - lp_prev)
+    k = dt_s * 2.0 * math.pi * cutoff_hz  # dt / tau
+    keep = np.multiply(intensity, 255.0 * k / _INTEN_SCALE_DN, out=scratch, dtype=np.float64)
+    keep += _INTEN_OFFSET_DN * k / _INTEN_SCALE_DN
+    np.minimum(keep, 1.0, out=keep)          # eps
+    np.subtract(1.0, keep, out=keep)         # 1 - eps
+    res = out if out is not None else np.empty(np.shape(lp_prev), np.float64)
+    # lp + eps (new - lp) == new + (1 - eps)(lp - new): no temporaries, and `out` may be `lp_prev`
+    np.subtract(lp_prev, log_new, out=res)
+    res *= keep
+    res += log_new
+    return res
 
 
 def sample_thresholds(rng: np.random.Generator, nominal: float, sigma: float, minimum: float,

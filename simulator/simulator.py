@@ -21,7 +21,7 @@ from simulator.config import SimulatorConfig
 from simulator.events import EventStream, empty_events
 from simulator.kernel_ref import emit_events_ref
 from simulator.kernels import Workspace, emit_events
-from simulator.noise import draw_noise_events
+from simulator.noise import NO_NOISE, draw_noise_events
 
 _NEVER_US = np.iinfo(np.int64).min // 4  # "no event yet" for the refractory clock
 BACKENDS = {"fast": emit_events, "ref": emit_events_ref}
@@ -61,7 +61,6 @@ class EventSimulator:
         if c.has_hot_pixels:
             n_hot = int(round(c.hot_pixel_fraction * P))
             self.hot_pixels = np.sort(fixed_rng.choice(P, size=n_hot, replace=False)).astype(np.int64)
-        self._no_noise = (np.zeros(P + 1, np.int64), np.empty(0, np.int64), np.empty(0, np.int8))
         self.t_prev_us: int | None = None
         self.n_frames = 0
         self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
@@ -118,21 +117,23 @@ class EventSimulator:
             return empty_events()
         dt_s = (t_us - self.t_prev_us) * 1e-6
         level = log_now
-        inten01 = pixel.intensity01(frame) if (c.has_lowpass or c.has_shot_noise) else None
-        if c.has_lowpass:
-            self._lp = pixel.lowpass_step(self._lp, log_now, inten01, dt_s, c.lowpass_cutoff_hz)
-            level = self._lp
-        if c.has_leak:
-            self._leak_offset += self._leak_rates_hz * self.c_pos * dt_s
-            level = level + self._leak_offset
-        noise = self._no_noise
+        if c.has_lowpass or c.has_leak:
+            level = self._level_bufs[self.n_frames % 2]  # the previous level stays in the other one
+            if c.has_lowpass:
+                pixel.lowpass_step(self._lp, log_now, frame, dt_s, c.lowpass_cutoff_hz, out=self._lp,
+                                   scratch=self._scratch)
+                np.copyto(level, self._lp)
+            else:
+                np.copyto(level, log_now)
+            if c.has_leak:
+                np.multiply(self._leak_step_per_s, dt_s, out=self._scratch)
+                self._leak_offset += self._scratch
+                level += self._leak_offset
+        noise = NO_NOISE
         if not c.is_noise_free:
-            shot_on = shot_off = None
-            if c.has_shot_noise:
-                shot_on = pixel.shot_noise_rates_hz(inten01, c.shot_noise_rate_hz, c.pos_threshold, self.c_pos)
-                shot_off = pixel.shot_noise_rates_hz(inten01, c.shot_noise_rate_hz, c.neg_threshold, self.c_neg)
-            noise = draw_noise_events(self._noise_rng, self.t_prev_us, t_us, shot_on, shot_off,
-                                      self.hot_pixels, c.hot_pixel_rate_hz, self.n_pixels)
+            noise = draw_noise_events(self._noise_rng, self.t_prev_us, t_us, self.n_pixels, frame,
+                                      c.shot_noise_rate_hz, (c.pos_threshold, c.neg_threshold),
+                                      self.c_pos, self.c_neg, self.hot_pixels, c.hot_pixel_rate_hz)
         events = self._emit(self._level, level, self._base, self._t_ready, self.c_pos, self.c_neg,
                             self.t_prev_us, t_us, c.refractory_us, *noise, self.width, **self._emit_kwargs)
         self._level = level
@@ -142,13 +143,19 @@ class EventSimulator:
 
     def _init_state(self, log_now: np.ndarray) -> None:
         c = self.config
-        self._lp = log_now.copy() if c.has_lowpass else None
-        self._leak_offset = np.zeros(self.n_pixels) if c.has_leak else None
+        P = self.n_pixels
+        if c.has_lowpass or c.has_leak:
+            self._level_bufs = [np.empty(P), np.empty(P)]
+            self._scratch = np.empty(P)
+        self._lp = log_now.astype(np.float64) if c.has_lowpass else None
+        if c.has_leak:
+            self._leak_offset = np.zeros(P)
+            self._leak_step_per_s = self._leak_rates_hz * self.c_pos  # reference drift, log units / s
         self._level = log_now  # input level at the previous frame (after low-pass and leak)
-        self._base = log_now.copy()
+        self._base = log_now.astype(np.float64)
         if c.has_leak:
             self._base -= self._leak_phase * self.c_pos
-        self._t_ready = np.full(self.n_pixels, _NEVER_US, np.int64)
+        self._t_ready = np.full(P, _NEVER_US, np.int64)
 
 
 def simulate(frames: Iterable[np.ndarray], t_us: Sequence[int], config: SimulatorConfig | None = None,

@@ -108,3 +108,19 @@ def test_lowpass_delays_and_smooths_the_response():
     assert first_dark.min() > first_bright.min()
     ideal = simulate(frames, t, SimulatorConfig()).events
     assert np.all(ideal["t"] <= 100)  # without the filter the step lands within one interval
+
+
+def test_lowpass_step_in_place_equals_the_formula(rng):
+    from simulator.pixel import lowpass_step
+
+    lp = rng.normal(0, 1, 50)
+    new = rng.normal(0, 1, 50)
+    inten = rng.uniform(0, 2, 50)
+    eps = np.minimum(intensity01(inten) * 1e-4 * 2 * np.pi * 300.0, 1.0)
+    expected = lp + eps * (new - lp)
+    np.testing.assert_allclose(lowpass_step(lp, new, inten, 1e-4, 300.0), expected, rtol=1e-12, atol=1e-12)
+    buf = lp.copy()
+    lowpass_step(buf, new, inten, 1e-4, 300.0, out=buf, scratch=np.empty(50))
+    np.testing.assert_allclose(buf, expected, rtol=1e-12, atol=1e-12)
+    # a huge step saturates the update weight at 1: the filter jumps straight to the input
+    np.testing.assert_allclose(lowpass_step(lp, new, inten + 1e9, 1e-4, 300.0), new)

@@ -66,7 +66,7 @@ def test_kernel_state_updates_match(rng):
     P = 300
     L0, L1 = rng.normal(0, 1, P), rng.normal(0, 1, P)
     args = dict(c_pos=np.full(P, 0.2), c_neg=rng.uniform(0.1, 0.3, P), t0_us=5000, t1_us=5400,
-                refractory_us=40, noise_ptr=np.zeros(P + 1, np.int64), noise_t=np.empty(0, np.int64),
+                refractory_us=40, noise_pix=np.empty(0, np.int64), noise_t=np.empty(0, np.int64),
                 noise_p=np.empty(0, np.int8), width=20)
     base0 = L0 + rng.uniform(-0.19, 0.19, P)
     ready0 = np.where(rng.random(P) < 0.3, 5000 + rng.integers(0, 500, P), -1)
