@@ -74,3 +74,13 @@ def test_dump_then_load_round_trip(tmp_path):
     with pytest.raises(ConfigError, match="nope: unknown key"):
         replace_checked(cfg, nope=1)
     assert from_dict(SimulatorConfig, {}) == SimulatorConfig()
+
+
+def test_shipped_simulator_configs_load():
+    from pathlib import Path
+
+    files = sorted((Path(__file__).parent.parent / "configs").glob("sim_*.yaml"))
+    assert len(files) >= 2
+    for f in files:
+        load_config(SimulatorConfig, f)
+    assert load_config(SimulatorConfig, files[0].with_name("sim_ideal.yaml")) == SimulatorConfig()
