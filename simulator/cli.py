@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +40,9 @@ def read_timestamps(path: Path, n_frames: int) -> list[int]:
 
 
 def add_simulate_parser(sub) -> None:
-    p = sub.add_parser("simulate", help="convert a folder of frames into an event file (DSEC HDF5)")
+    p = sub.add_parser("simulate", help="convert a folder of frames into an event file (DSEC HDF5)",
+                       description="Simulate a DVS on a frame sequence. A killed run resumes from its last "
+                                   "checkpoint when started again with the same inputs.")
     p.add_argument("--frames", type=Path, required=True,
                    help="folder of frames sorted by name: EXR (linear) or PNG (sRGB, linearised)")
     src = p.add_mutually_exclusive_group(required=True)
@@ -48,7 +52,19 @@ def add_simulate_parser(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
     p.add_argument("--config", type=Path, help="simulator config YAML (default: noise-free, C = 0.2)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--checkpoint-every", type=int, default=500, metavar="N",
+                   help="save a resumable checkpoint every N frames (default 500)")
     p.set_defaults(func=run_simulate)
+
+
+def job_fingerprint(config_yaml: str, seed: int, files: list[Path], t_us: list[int]) -> str:
+    """Identity of a simulate job: config, seed, frame files (name, size, mtime) and timestamps."""
+    h = hashlib.sha256()
+    h.update(json.dumps([config_yaml, seed, t_us]).encode())
+    for f in files:
+        st = f.stat()
+        h.update(f"{f.name}:{st.st_size}:{st.st_mtime_ns};".encode())
+    return h.hexdigest()
 
 
 def run_simulate(args: argparse.Namespace) -> int:
@@ -57,7 +73,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from e4dgs.config import ConfigError, dump_config, load_config, to_dict
     from e4dgs.imageio import ImageReadError, read_linear_image
     from simulator.config import SimulatorConfig
-    from simulator.h5io import EventFileWriter
+    from simulator.resumable import ResumableEventWriter
     from simulator.simulator import EventSimulator, FrameError
 
     try:
@@ -71,31 +87,38 @@ def run_simulate(args: argparse.Namespace) -> int:
         if not args.fps > 0:
             raise SystemExit(f"error: --fps must be positive, got {args.fps}")
         t_us = [args.t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
-    first = read_linear_image(files[0])
+    if args.checkpoint_every < 1:
+        raise SystemExit("error: --checkpoint-every must be at least 1")
+    try:
+        first = read_linear_image(files[0])
+    except ImageReadError as exc:
+        raise SystemExit(f"error: {exc}") from None
     height, width = first.shape[:2]
+    config_yaml = dump_config(config)
     attrs = {f"sim_{k}": v for k, v in to_dict(config).items()}
-    attrs.update(simulator_config=dump_config(config), seed=args.seed, source_frames=str(args.frames),
+    attrs.update(simulator_config=config_yaml, seed=args.seed, source_frames=str(args.frames),
                  n_frames=len(files))
+    writer = ResumableEventWriter(args.out, width, height, job_fingerprint(config_yaml, args.seed, files, t_us),
+                                  t_offset_us=t_us[0], attrs=attrs)
     sim = EventSimulator(config, width, height, seed=args.seed)
-    pending, n_pending, n_events = [], 0, 0
-    with EventFileWriter(args.out, width, height, t_offset_us=t_us[0], attrs=attrs) as writer:
-        for k, path in enumerate(tqdm(files, desc="simulate", unit="frame")):
+    start = 0
+    if writer.resumed_state is not None:
+        sim.load_state_dict(writer.resumed_state)
+        start = int(writer.resumed_state["next_frame"])
+        print(f"resuming {args.out} at frame {start} of {len(files)} ({writer.n_events} events kept)")
+    try:
+        for k in tqdm(range(start, len(files)), desc="simulate", unit="frame", initial=start, total=len(files)):
             try:
-                frame = first if k == 0 else read_linear_image(path)
-                events = sim.push(frame, t_us[k])
+                frame = first if k == 0 else read_linear_image(files[k])
+                writer.append(sim.push(frame, t_us[k]))
             except (FrameError, ImageReadError) as exc:
-                raise SystemExit(f"error: {path}: {exc}") from None
-            pending.append(events)
-            n_pending += len(events)
-            if n_pending >= 1 << 20:
-                writer.append(np.concatenate(pending))
-                n_events += n_pending
-                pending, n_pending = [], 0
-        if pending:
-            writer.append(np.concatenate(pending))
-            n_events += n_pending
-        writer.close(t_end_us=t_us[-1])
-    print(f"{args.out}: {n_events} events from {len(files)} frames ({width}x{height})")
+                raise SystemExit(f"error: {files[k]}: {exc}") from None
+            if (k + 1) % args.checkpoint_every == 0 and k + 1 < len(files):
+                writer.checkpoint({**sim.state_dict(), "next_frame": k + 1})
+        writer.finish(t_end_us=t_us[-1])
+    finally:
+        writer.close()
+    print(f"{args.out}: {writer.n_events} events from {len(files)} frames ({width}x{height})")
     return 0
 
 

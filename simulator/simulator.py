@@ -12,10 +12,12 @@ refractory period and exact per-crossing timestamps (`kernels.emit_events`).
 """
 from __future__ import annotations
 
-from typing import Iterable, Sequence
+import json
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from e4dgs.config import to_dict
 from simulator import pixel
 from simulator.config import SimulatorConfig
 from simulator.events import EventStream, empty_events
@@ -57,6 +59,7 @@ class EventSimulator:
             decades = fixed_rng.normal(0.0, c.leak_rate_sigma_decades, P) if c.leak_rate_sigma_decades > 0 else 0.0
             self._leak_rates_hz = c.leak_rate_hz * 10.0 ** decades * np.ones(P)
             self._leak_phase = fixed_rng.random(P)  # desynchronises leak events across pixels
+            self._leak_step_per_s = self._leak_rates_hz * self.c_pos  # reference drift, log units / s
         self.hot_pixels = None
         if c.has_hot_pixels:
             n_hot = int(round(c.hot_pixel_fraction * P))
@@ -64,6 +67,10 @@ class EventSimulator:
         self.t_prev_us: int | None = None
         self.n_frames = 0
         self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
+        if c.has_lowpass or c.has_leak:
+            self._level_bufs = [np.empty(P), np.empty(P)]
+            self._scratch = np.empty(P)
+        self._lp = self._leak_offset = None
 
     # -- input checks -----------------------------------------------------------------------
     def _prepare(self, frame, t_us) -> tuple[np.ndarray, int]:
@@ -144,18 +151,46 @@ class EventSimulator:
     def _init_state(self, log_now: np.ndarray) -> None:
         c = self.config
         P = self.n_pixels
-        if c.has_lowpass or c.has_leak:
-            self._level_bufs = [np.empty(P), np.empty(P)]
-            self._scratch = np.empty(P)
         self._lp = log_now.astype(np.float64) if c.has_lowpass else None
-        if c.has_leak:
-            self._leak_offset = np.zeros(P)
-            self._leak_step_per_s = self._leak_rates_hz * self.c_pos  # reference drift, log units / s
+        self._leak_offset = np.zeros(P) if c.has_leak else None
         self._level = log_now  # input level at the previous frame (after low-pass and leak)
         self._base = log_now.astype(np.float64)
         if c.has_leak:
             self._base -= self._leak_phase * self.c_pos
         self._t_ready = np.full(P, _NEVER_US, np.int64)
+
+    # -- checkpoints ------------------------------------------------------------------------
+    _STATE_ARRAYS = ("_level", "_base", "_t_ready", "_lp", "_leak_offset")
+
+    def state_dict(self) -> dict:
+        """Everything needed to continue this sensor later: a dict of arrays and scalars.
+
+        Fixed-pattern parameters (thresholds, leak rates, hot pixels) are not stored: they are
+        regenerated from the seed, and `load_state_dict` checks that seed, size and config match.
+        """
+        state = {"width": self.width, "height": self.height, "seed": self.seed,
+                 "config": json.dumps(to_dict(self.config), sort_keys=True), "n_frames": self.n_frames,
+                 "t_prev_us": 0 if self.t_prev_us is None else self.t_prev_us,
+                 "noise_rng": json.dumps(self._noise_rng.bit_generator.state)}
+        if self.t_prev_us is not None:
+            for name in self._STATE_ARRAYS:
+                value = getattr(self, name)
+                if value is not None:
+                    state[name] = value.copy()
+        return state
+
+    def load_state_dict(self, state: Mapping) -> None:
+        """Continue from `state_dict()` of a simulator built with the same config, size and seed."""
+        mine = self.state_dict()
+        for key in ("width", "height", "seed", "config"):
+            if str(state[key]) != str(mine[key]):
+                raise ValueError(f"simulator state does not match this simulator: {key} is {state[key]} "
+                                 f"in the state, {mine[key]} here")
+        self.n_frames = int(state["n_frames"])
+        self.t_prev_us = None if self.n_frames == 0 else int(state["t_prev_us"])
+        self._noise_rng.bit_generator.state = json.loads(str(state["noise_rng"]))
+        for name in self._STATE_ARRAYS:
+            setattr(self, name, np.array(state[name]) if name in state else None)
 
 
 def simulate(frames: Iterable[np.ndarray], t_us: Sequence[int], config: SimulatorConfig | None = None,

@@ -97,3 +97,57 @@ def test_view_png_and_mp4(exr_dir, tmp_path):
 def test_console_entry_point_is_installed():
     r = subprocess.run([sys.executable, "-m", "e4dgs", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "simulate" in r.stdout and "view" in r.stdout
+
+
+def test_killed_simulate_resumes_to_the_same_file(exr_dir, tmp_path, monkeypatch):
+    from e4dgs import imageio
+    from simulator.h5io import read_info
+
+    cfg = tmp_path / "noisy.yaml"  # random noise too: the resumed run must continue the same RNG stream
+    cfg.write_text("shot_noise_rate_hz: 2000.0\nrefractory_us: 30\nthreshold_sigma: 0.03\nleak_rate_hz: 50.0\n")
+    args = ["simulate", "--frames", str(exr_dir), "--fps", "3000", "--config", str(cfg), "--checkpoint-every", "3"]
+    clean = tmp_path / "clean.h5"
+    main(args + ["--out", str(clean)])
+
+    out = tmp_path / "resumed.h5"
+    real_read = imageio.read_linear_image
+    calls = []
+
+    def dying_read(path):
+        calls.append(path)
+        if len(calls) == 8:
+            raise KeyboardInterrupt("killed")
+        return real_read(path)
+
+    monkeypatch.setattr(imageio, "read_linear_image", dying_read)
+    with pytest.raises(KeyboardInterrupt):
+        main(args + ["--out", str(out)])
+    assert not out.exists()  # nothing that looks complete
+    assert (tmp_path / ".resumed.h5.ckpt.npz").exists()
+    monkeypatch.setattr(imageio, "read_linear_image", real_read)
+    main(args + ["--out", str(out)])
+    assert np.array_equal(read_events(out).events, read_events(clean).events)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+    assert read_info(out)["n_events"] == read_info(clean)["n_events"] > 0
+
+
+def test_changed_inputs_discard_a_stale_checkpoint(exr_dir, tmp_path, monkeypatch):
+    from e4dgs import imageio
+
+    out = tmp_path / "ev.h5"
+    real_read = imageio.read_linear_image
+    calls = []
+
+    def dying_read(path):
+        calls.append(path)
+        if len(calls) == 6:
+            raise KeyboardInterrupt
+        return real_read(path)
+
+    monkeypatch.setattr(imageio, "read_linear_image", dying_read)
+    with pytest.raises(KeyboardInterrupt):
+        main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out), "--checkpoint-every", "2"])
+    monkeypatch.setattr(imageio, "read_linear_image", real_read)
+    main(["simulate", "--frames", str(exr_dir), "--fps", "1000", "--out", str(out)])  # other timestamps
+    expected = simulate(grating_frames(), [round(k * 1e6 / 1000) for k in range(12)], SimulatorConfig())
+    assert np.array_equal(read_events(out).events, expected.events)
