@@ -47,6 +47,13 @@ def _room_for(n, cap, a_minus_level, inv_c):
 
 
 @_jit
+def _thresholds(c_pos, c_neg, i):
+    """(C+, C-, 1 / min(C+, C-)) of pixel i; arrays of length 1 hold one value for all pixels."""
+    j = 0 if c_pos.shape[0] == 1 else i
+    return c_pos[j], c_neg[j], 1.0 / min(c_pos[j], c_neg[j])
+
+
+@_jit
 def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, width, i_begin, i_end, keys, n):
     """Threshold crossings only (no refractory period, no noise) for pixels [i_begin, i_end).
 
@@ -56,16 +63,12 @@ def _emit_clean(L0, L1, base, c_pos, c_neg, t0_us, t1_us, width, i_begin, i_end,
     Df = float(t1_us - t0_us)
     cap = keys.shape[0]
     uniform = c_pos.shape[0] == 1
-    cp = c_pos[0]
-    cn = c_neg[0]
-    inv_c = 1.0 / min(cp, cn)
+    cp, cn, inv_c = _thresholds(c_pos, c_neg, 0)
     y = i_begin // width
     x = i_begin - y * width
     for i in range(i_begin, i_end):
         if not uniform:
-            cp = c_pos[i]
-            cn = c_neg[i]
-            inv_c = 1.0 / min(cp, cn)
+            cp, cn, inv_c = _thresholds(c_pos, c_neg, i)
         a = float(L0[i])
         b = float(L1[i])
         level = base[i]
@@ -119,9 +122,7 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pi
     Df = float(D)
     cap = keys.shape[0]
     uniform = c_pos.shape[0] == 1
-    cp = c_pos[0]
-    cn = c_neg[0]
-    inv_c = 1.0 / min(cp, cn)
+    cp, cn, inv_c = _thresholds(c_pos, c_neg, 0)
     max_refractory_events = (D - 1) // R + 1 if R > 0 else 0
     M = noise_pix.shape[0]
     k_end = np.searchsorted(noise_pix, i_begin)  # cursor into the (pixel, time)-sorted noise events
@@ -134,9 +135,7 @@ def _emit_general(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, R, noise_pi
             x = 0
             y += 1
         if not uniform:
-            cp = c_pos[i]
-            cn = c_neg[i]
-            inv_c = 1.0 / min(cp, cn)
+            cp, cn, inv_c = _thresholds(c_pos, c_neg, i)
         a = float(L0[i])
         b = float(L1[i])
         level = base[i]

@@ -1,4 +1,5 @@
 """`e4dgs simulate` and `e4dgs view` end to end on small image folders."""
+import contextlib
 import subprocess
 import sys
 
@@ -99,10 +100,25 @@ def test_console_entry_point_is_installed():
     assert r.returncode == 0 and "simulate" in r.stdout and "view" in r.stdout
 
 
-def test_killed_simulate_resumes_to_the_same_file(exr_dir, tmp_path, monkeypatch):
+@contextlib.contextmanager
+def killed_at_frame_read(monkeypatch, n):
+    """Interrupt the run (as a kill would) when it reads its n-th frame file."""
     from e4dgs import imageio
-    from simulator.h5io import read_info
 
+    real_read, calls = imageio.read_linear_image, []
+
+    def dying_read(path):
+        calls.append(path)
+        if len(calls) == n:
+            raise KeyboardInterrupt("killed")
+        return real_read(path)
+
+    with monkeypatch.context() as m:
+        m.setattr(imageio, "read_linear_image", dying_read)
+        yield
+
+
+def test_killed_simulate_resumes_to_the_same_file(exr_dir, tmp_path, monkeypatch):
     cfg = tmp_path / "noisy.yaml"  # random noise too: the resumed run must continue the same RNG stream
     cfg.write_text("shot_noise_rate_hz: 2000.0\nrefractory_us: 30\nthreshold_sigma: 0.03\nleak_rate_hz: 50.0\n")
     args = ["simulate", "--frames", str(exr_dir), "--fps", "3000", "--config", str(cfg), "--checkpoint-every", "3"]
@@ -110,21 +126,11 @@ def test_killed_simulate_resumes_to_the_same_file(exr_dir, tmp_path, monkeypatch
     main(args + ["--out", str(clean)])
 
     out = tmp_path / "resumed.h5"
-    real_read = imageio.read_linear_image
-    calls = []
-
-    def dying_read(path):
-        calls.append(path)
-        if len(calls) == 8:
-            raise KeyboardInterrupt("killed")
-        return real_read(path)
-
-    monkeypatch.setattr(imageio, "read_linear_image", dying_read)
     with pytest.raises(KeyboardInterrupt):
-        main(args + ["--out", str(out)])
+        with killed_at_frame_read(monkeypatch, 8):
+            main(args + ["--out", str(out)])
     assert not out.exists()  # nothing that looks complete
     assert (tmp_path / ".resumed.h5.ckpt.npz").exists()
-    monkeypatch.setattr(imageio, "read_linear_image", real_read)
     main(args + ["--out", str(out)])
     assert np.array_equal(read_events(out).events, read_events(clean).events)
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
@@ -132,22 +138,10 @@ def test_killed_simulate_resumes_to_the_same_file(exr_dir, tmp_path, monkeypatch
 
 
 def test_changed_inputs_discard_a_stale_checkpoint(exr_dir, tmp_path, monkeypatch):
-    from e4dgs import imageio
-
     out = tmp_path / "ev.h5"
-    real_read = imageio.read_linear_image
-    calls = []
-
-    def dying_read(path):
-        calls.append(path)
-        if len(calls) == 6:
-            raise KeyboardInterrupt
-        return real_read(path)
-
-    monkeypatch.setattr(imageio, "read_linear_image", dying_read)
     with pytest.raises(KeyboardInterrupt):
-        main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out), "--checkpoint-every", "2"])
-    monkeypatch.setattr(imageio, "read_linear_image", real_read)
+        with killed_at_frame_read(monkeypatch, 6):
+            main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out), "--checkpoint-every", "2"])
     main(["simulate", "--frames", str(exr_dir), "--fps", "1000", "--out", str(out)])  # other timestamps
     expected = simulate(grating_frames(), [round(k * 1e6 / 1000) for k in range(12)], SimulatorConfig())
     assert np.array_equal(read_events(out).events, expected.events)
