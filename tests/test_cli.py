@@ -96,8 +96,15 @@ def test_view_png_and_mp4(exr_dir, tmp_path):
 
 
 def test_console_entry_point_is_installed():
-    r = subprocess.run([sys.executable, "-m", "e4dgs", "--help"], capture_output=True, text=True)
-    assert r.returncode == 0 and "simulate" in r.stdout and "view" in r.stdout
+    from pathlib import Path
+
+    script = Path(sys.executable).parent / "e4dgs"
+    for cmd in ([str(script), "--help"], [sys.executable, "-m", "e4dgs", "--help"]):
+        r = subprocess.run(cmd, capture_output=True, text=True)
+        assert r.returncode == 0 and "simulate" in r.stdout and "view" in r.stdout
+    r = subprocess.run([str(script), "simulate", "--frames", "/nonexistent", "--fps", "30", "--out", "x.h5"],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and "not a directory" in r.stderr
 
 
 @contextlib.contextmanager
