@@ -73,7 +73,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     from e4dgs.config import ConfigError, dump_config, load_config, to_dict
     from e4dgs.imageio import ImageReadError, read_linear_image
     from simulator.config import SimulatorConfig
-    from simulator.resumable import ResumableEventWriter
+    from e4dgs.checkpoint import JobCheckpoint
+    from simulator.resumable import EventSpool
     from simulator.simulator import EventSimulator, FrameError
 
     try:
@@ -98,27 +99,31 @@ def run_simulate(args: argparse.Namespace) -> int:
     attrs = {f"sim_{k}": v for k, v in to_dict(config).items()}
     attrs.update(simulator_config=config_yaml, seed=args.seed, source_frames=str(args.frames),
                  n_frames=len(files))
-    writer = ResumableEventWriter(args.out, width, height, job_fingerprint(config_yaml, args.seed, files, t_us),
-                                  t_offset_us=t_us[0], attrs=attrs)
+    ckpt = JobCheckpoint(args.out.with_name(f".{args.out.name}.ckpt.npz"),
+                         job_fingerprint(config_yaml, args.seed, files, t_us))
+    state = ckpt.load()
+    spool = EventSpool(args.out, width, height, t_offset_us=t_us[0], attrs=attrs,
+                       resume_count=None if state is None else int(state["n_events"]))
     sim = EventSimulator(config, width, height, seed=args.seed)
     start = 0
-    if writer.resumed_state is not None:
-        sim.load_state_dict(writer.resumed_state)
-        start = int(writer.resumed_state["next_frame"])
-        print(f"resuming {args.out} at frame {start} of {len(files)} ({writer.n_events} events kept)")
+    if state is not None:
+        sim.load_state_dict(state)
+        start = int(state["next_frame"])
+        print(f"resuming {args.out} at frame {start} of {len(files)} ({spool.n_events} events kept)")
     try:
         for k in tqdm(range(start, len(files)), desc="simulate", unit="frame", initial=start, total=len(files)):
             try:
                 frame = first if k == 0 else read_linear_image(files[k])
-                writer.append(sim.push(frame, t_us[k]))
+                spool.append(sim.push(frame, t_us[k]))
             except (FrameError, ImageReadError) as exc:
                 raise SystemExit(f"error: {files[k]}: {exc}") from None
             if (k + 1) % args.checkpoint_every == 0 and k + 1 < len(files):
-                writer.checkpoint({**sim.state_dict(), "next_frame": k + 1})
-        writer.finish(t_end_us=t_us[-1])
+                ckpt.save({**sim.state_dict(), "next_frame": k + 1, "n_events": spool.sync()})
+        spool.finish(t_end_us=t_us[-1])
+        ckpt.remove()
     finally:
-        writer.close()
-    print(f"{args.out}: {writer.n_events} events from {len(files)} frames ({width}x{height})")
+        spool.close()
+    print(f"{args.out}: {spool.n_events} events from {len(files)} frames ({width}x{height})")
     return 0
 
 

@@ -1,12 +1,13 @@
-"""Crash-safe event output for long jobs: spool, checkpoint, resume, then one HDF5 file.
+"""Crash-safe event output for long jobs: spool events, resume after a kill, then one HDF5 file.
 
-HDF5 files are not safe to reopen after a process is killed mid-write, so a long job appends its
-events to a raw spool file (`.<name>.spool`, EVENT_DTYPE records) and, at checkpoints, records how
-many events the spool holds together with the job's own state (`.<name>.ckpt.npz`, written
-atomically). After a kill, the next run with the same fingerprint truncates the spool to the last
-checkpoint and hands the job its state back; `finish` converts the spool into the final HDF5 file
-(temporary name, then rename) and removes the spool and checkpoint. The final file therefore
-appears only when complete, and a resumed run produces the same file as an uninterrupted one.
+HDF5 files are not safe to reopen after a process was killed mid-write, so a long job appends its
+events to a raw spool file (`.<name>.spool`, EVENT_DTYPE records). At its checkpoints the job calls
+`sync()`, which makes the spool durable and returns its event count, and stores that count in its
+own checkpoint (`e4dgs.checkpoint.JobCheckpoint`, together with e.g. the simulator state). After a
+kill, the job reopens the spool with `resume_count` = that count: the spool is truncated to it and
+the job continues. `finish` converts the spool into the final HDF5 file (temporary name, then
+rename) and deletes the spool. The final file appears only when complete, and a resumed run
+produces the same file as an uninterrupted one.
 """
 from __future__ import annotations
 
@@ -16,46 +17,33 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from e4dgs.fileio import atomic_output
 from simulator.events import EVENT_DTYPE, validate_events
 from simulator.h5io import EventFileWriter
 
 _CHUNK_EVENTS = 1 << 21
-_KEY = "writer__"  # prefix of the writer's own entries in the checkpoint
 
 
-class ResumableEventWriter:
-    """Event output of one sensor for a job that may be killed and restarted.
+class EventSpool:
+    """Append-only event output of one sensor, resumable at the counts `sync()` returned."""
 
-    After construction, `resumed_state` is the job state saved at the last checkpoint (a dict), or
-    None for a fresh start. `fingerprint` identifies the job's inputs: a checkpoint made with a
-    different fingerprint is discarded.
-    """
-
-    def __init__(self, path: str | os.PathLike, width: int, height: int, fingerprint: str,
-                 t_offset_us: int = 0, attrs: Mapping[str, Any] | None = None):
+    def __init__(self, path: str | os.PathLike, width: int, height: int, t_offset_us: int = 0,
+                 attrs: Mapping[str, Any] | None = None, resume_count: int | None = None):
         self.path = Path(path)
         self.width, self.height, self.t_offset_us = int(width), int(height), int(t_offset_us)
         self.attrs = dict(attrs or {})
-        self.fingerprint = str(fingerprint)
         self.spool_path = self.path.with_name(f".{self.path.name}.spool")
-        self.ckpt_path = self.path.with_name(f".{self.path.name}.ckpt.npz")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.resumed_state: dict[str, Any] | None = None
-        n_kept = 0
-        if self.ckpt_path.exists() and self.spool_path.exists():
-            with np.load(self.ckpt_path, allow_pickle=False) as z:
-                if str(z[_KEY + "fingerprint"]) == self.fingerprint:
-                    n_kept = int(z[_KEY + "n_events"])
-                    self._last_t = int(z[_KEY + "last_t"])
-                    self.resumed_state = {k: z[k] for k in z.files if not k.startswith(_KEY)}
-        if self.resumed_state is None:
-            self.ckpt_path.unlink(missing_ok=True)
-            self._last_t = np.iinfo(np.int64).min
-        self._spool = open(self.spool_path, "r+b" if n_kept else "w+b")
-        self._spool.truncate(n_kept * EVENT_DTYPE.itemsize)
+        n = int(resume_count or 0)
+        if n and (not self.spool_path.exists() or self.spool_path.stat().st_size < n * EVENT_DTYPE.itemsize):
+            raise ValueError(f"{self.spool_path}: cannot resume at {n} events: the spool is missing or shorter")
+        self._spool = open(self.spool_path, "r+b" if n else "w+b")
+        self._spool.truncate(n * EVENT_DTYPE.itemsize)
+        self._last_t = np.iinfo(np.int64).min
+        if n:
+            self._spool.seek((n - 1) * EVENT_DTYPE.itemsize)
+            self._last_t = int(np.frombuffer(self._spool.read(EVENT_DTYPE.itemsize), EVENT_DTYPE)["t"][0])
         self._spool.seek(0, os.SEEK_END)
-        self.n_events = n_kept
+        self.n_events = n
 
     def append(self, events: np.ndarray) -> None:
         if len(events) == 0:
@@ -67,19 +55,14 @@ class ResumableEventWriter:
         self.n_events += len(events)
         self._last_t = int(events["t"][-1])
 
-    def checkpoint(self, state: Mapping[str, Any]) -> None:
-        """Make everything appended so far durable, together with the job's `state`."""
+    def sync(self) -> int:
+        """Flush to disk; returns the event count to pass as `resume_count` after a kill."""
         self._spool.flush()
         os.fsync(self._spool.fileno())
-        arrays = {k: np.asarray(v) for k, v in state.items()}
-        arrays.update({_KEY + "fingerprint": np.asarray(self.fingerprint),
-                       _KEY + "n_events": np.int64(self.n_events), _KEY + "last_t": np.int64(self._last_t)})
-        with atomic_output(self.ckpt_path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays)
+        return self.n_events
 
     def finish(self, t_end_us: int | None = None) -> Path:
-        """Write the final HDF5 file from the spool, then remove spool and checkpoint."""
+        """Write the final HDF5 file from the spool, then delete the spool."""
         self._spool.flush()
         self._spool.seek(0)
         with EventFileWriter(self.path, self.width, self.height, self.t_offset_us, self.attrs) as w:
@@ -91,10 +74,9 @@ class ResumableEventWriter:
             w.close(t_end_us)
         self.close()
         self.spool_path.unlink(missing_ok=True)
-        self.ckpt_path.unlink(missing_ok=True)
         return self.path
 
     def close(self) -> None:
-        """Release the spool file, keeping spool and checkpoint for a later resume."""
+        """Release the spool file, keeping it for a later resume."""
         if not self._spool.closed:
             self._spool.close()

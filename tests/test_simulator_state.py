@@ -4,7 +4,8 @@ import pytest
 
 from simulator import EventSimulator, SimulatorConfig
 from simulator.h5io import read_events
-from simulator.resumable import ResumableEventWriter
+from e4dgs.checkpoint import JobCheckpoint
+from simulator.resumable import EventSpool
 
 NOISY = SimulatorConfig(threshold_sigma=0.04, lowpass_cutoff_hz=400.0, refractory_us=60, leak_rate_hz=40.0,
                         shot_noise_rate_hz=800.0, hot_pixel_fraction=0.05, hot_pixel_rate_hz=900.0)
@@ -33,7 +34,7 @@ def test_state_of_another_sensor_is_refused():
             other.load_state_dict(state)
 
 
-def test_resumable_writer_truncates_to_the_last_checkpoint(tmp_path, rng):
+def test_event_spool_resumes_at_the_synced_count(tmp_path, rng):
     from simulator.events import make_events
 
     def batch(t0, n):
@@ -41,24 +42,32 @@ def test_resumable_writer_truncates_to_the_last_checkpoint(tmp_path, rng):
 
     out = tmp_path / "ev.h5"
     a, b, c = batch(0, 100), batch(100, 50), batch(150, 70)
-    w = ResumableEventWriter(out, 8, 6, fingerprint="job-1")
-    assert w.resumed_state is None
-    w.append(a)
-    w.checkpoint({"next_frame": 4})
-    w.append(b)          # written after the last checkpoint: lost in the "crash"
-    w.close()
-    w = ResumableEventWriter(out, 8, 6, fingerprint="job-1")
-    assert int(w.resumed_state["next_frame"]) == 4 and w.n_events == 100
-    w.append(b)
-    w.append(c)
-    w.finish(t_end_us=300)
+    spool = EventSpool(out, 8, 6)
+    spool.append(a)
+    count = spool.sync()
+    spool.append(b)          # written after the last sync: lost in the "crash"
+    spool.close()
+    assert not out.exists()
+    spool = EventSpool(out, 8, 6, resume_count=count)
+    assert spool.n_events == 100
+    with pytest.raises(ValueError, match="out of time order"):
+        spool.append(batch(50, 3))
+    spool.append(b)
+    spool.append(c)
+    spool.finish(t_end_us=300)
     assert np.array_equal(read_events(out).events, np.concatenate([a, b, c]))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev.h5"]
-    # another job's checkpoint is never resumed
-    w = ResumableEventWriter(out, 8, 6, fingerprint="job-1")
-    w.append(a)
-    w.checkpoint({"next_frame": 1})
-    w.close()
-    w = ResumableEventWriter(out, 8, 6, fingerprint="job-2")
-    assert w.resumed_state is None and w.n_events == 0
-    w.close()
+    with pytest.raises(ValueError, match="cannot resume"):
+        EventSpool(tmp_path / "other.h5", 8, 6, resume_count=5)
+
+
+def test_job_checkpoint_is_tied_to_its_fingerprint(tmp_path):
+    ckpt = JobCheckpoint(tmp_path / "job.npz", "inputs-1")
+    assert ckpt.load() is None
+    ckpt.save({"next_frame": 7, "level": np.arange(3.0), "note": "x"})
+    state = JobCheckpoint(tmp_path / "job.npz", "inputs-1").load()
+    assert int(state["next_frame"]) == 7 and state["level"].tolist() == [0.0, 1.0, 2.0] and str(state["note"]) == "x"
+    assert JobCheckpoint(tmp_path / "job.npz", "inputs-2").load() is None
+    assert not (tmp_path / "job.npz").exists()  # a stale checkpoint is dropped
+    (tmp_path / "bad.npz").write_bytes(b"garbage")
+    assert JobCheckpoint(tmp_path / "bad.npz", "x").load() is None

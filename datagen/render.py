@@ -1,0 +1,147 @@
+"""Rendering with bpy: engine setup, cameras, one view into a NumPy array.
+
+Blender has no in-memory read-back of a render in background mode, so each view is rendered to an
+EXR in /dev/shm (RAM) and read back (< 0.02 s). EXR output is scene-linear: no view transform is
+applied on this path, which is what the event simulator needs.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import bpy
+import mathutils
+import numpy as np
+
+from datagen.cameras import FLIP_YZ, Intrinsics
+from datagen.config import SceneConfig
+from e4dgs.imageio import read_exr
+
+ANIM_FRAMES = 1000  # scene animation spans Blender frames 1 .. 1 + ANIM_FRAMES over normalised time [0, 1]
+ENGINE_IDS = {"workbench": "BLENDER_WORKBENCH", "cycles": "CYCLES", "eevee": "BLENDER_EEVEE"}
+
+
+def frame_of(tau: float) -> float:
+    """Blender frame number of normalised clip time tau in [0, 1] (scene builders keyframe with it)."""
+    return 1.0 + ANIM_FRAMES * tau
+
+
+def reset_scene() -> bpy.types.Scene:
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene
+
+
+def setup_render(cfg: SceneConfig) -> None:
+    sc = bpy.context.scene
+    r = cfg.render
+    if r.engine == "cycles":
+        import addon_utils
+
+        addon_utils.enable("cycles", default_set=True)
+    sc.render.engine = ENGINE_IDS[r.engine]
+    sc.render.resolution_x, sc.render.resolution_y = r.width, r.height
+    sc.render.resolution_percentage = 100
+    sc.render.pixel_aspect_x = sc.render.pixel_aspect_y = 1.0
+    sc.render.fps = 30
+    sc.frame_start, sc.frame_end = 1, 1 + ANIM_FRAMES
+    sc.render.use_motion_blur = False
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.image_settings.color_depth = "32"
+    sc.render.image_settings.exr_codec = "NONE"
+    sc.render.image_settings.color_mode = "RGB"
+    sc.view_settings.view_transform = "Standard"
+    sc.view_settings.look = "None"
+    sc.view_settings.exposure = 0.0
+    sc.view_settings.gamma = 1.0
+    world = sc.world or bpy.data.worlds.new("World")
+    sc.world = world
+    world.color = cfg.lighting.background
+    if r.engine == "workbench":
+        lt = cfg.lighting
+        sc.display.render_aa = {1: "OFF"}.get(r.samples, str(r.samples))
+        sh = sc.display.shading
+        sh.light = "STUDIO"
+        sh.studio_light = lt.studio_light
+        sh.use_world_space_lighting = True   # shading fixed in the world, not to the moving camera
+        sh.studiolight_rotate_z = math.radians(lt.rotate_z_deg)
+        sh.color_type = "TEXTURE"
+        sh.show_shadows = lt.shadows
+        sh.shadow_intensity = lt.shadow_intensity
+        sh.show_cavity = lt.cavity
+        sh.show_specular_highlight = False   # view-dependent highlights would break brightness constancy
+        sc.display.light_direction = lt.light_direction
+    elif r.engine == "cycles":
+        sc.cycles.device = "CPU"
+        sc.cycles.samples = r.samples
+        sc.cycles.use_denoising = False
+        sc.cycles.use_adaptive_sampling = False
+        sc.cycles.use_animated_seed = True  # independent noise per frame, as a real render farm would give
+        sc.cycles.seed = cfg.seed
+    else:
+        sc.eevee.taa_render_samples = r.samples
+
+
+def make_cameras(n: int, intr: Intrinsics) -> list[bpy.types.Object]:
+    """n camera objects whose projection equals K (horizontal sensor fit, centred principal point)."""
+    cams = []
+    for k in range(n):
+        data = bpy.data.cameras.new(f"cam{k}")
+        data.sensor_fit = "HORIZONTAL"
+        data.sensor_width = 36.0
+        data.lens = intr.fx * data.sensor_width / intr.width
+        data.shift_x = (intr.width / 2.0 - intr.cx) / intr.width
+        data.shift_y = (intr.cy - intr.height / 2.0) / intr.width
+        data.clip_start, data.clip_end = 0.01, 1000.0
+        obj = bpy.data.objects.new(f"cam{k}", data)
+        bpy.context.scene.collection.objects.link(obj)
+        cams.append(obj)
+    return cams
+
+
+def set_pose(cam: bpy.types.Object, c2w_opencv: np.ndarray) -> None:
+    cam.matrix_world = mathutils.Matrix((c2w_opencv @ FLIP_YZ).tolist())
+
+
+def set_time(tau: float) -> None:
+    f = frame_of(tau)
+    bpy.context.scene.frame_set(int(math.floor(f)), subframe=f - math.floor(f))
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Blender prints a line per saved render to fd 1; keep the terminal for progress bars."""
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+class ViewRenderer:
+    """Renders the current scene state from a camera into float32 linear RGB [H, W, 3]."""
+
+    def __init__(self):
+        shm = Path("/dev/shm") if Path("/dev/shm").is_dir() else Path(tempfile.gettempdir())
+        self._dir = Path(tempfile.mkdtemp(prefix="e4dgs-render-", dir=shm))
+        self._path = self._dir / "view.exr"
+        bpy.context.scene.render.filepath = str(self._path)
+
+    def render(self, cam: bpy.types.Object) -> np.ndarray:
+        sc = bpy.context.scene
+        sc.camera = cam
+        with _quiet_stdout():
+            bpy.ops.render.render(write_still=True)
+        img = read_exr(self._path)
+        return np.ascontiguousarray(img[..., :3], dtype=np.float32)
+
+    def close(self) -> None:
+        self._path.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            self._dir.rmdir()
