@@ -80,6 +80,10 @@ class LightingConfig:
     light_direction: tuple[float, float, float] = (0.4, -0.3, 0.85)
     cavity: bool = False
     background: tuple[float, float, float] = (0.05, 0.05, 0.06)  # linear RGB of the empty background
+    exposure: float = 1.0  # linear gain on rendered radiance (a brighter or dimmer scene)
+
+    def __post_init__(self):
+        _positive(self, "exposure")
 
 
 @dataclass(frozen=True)
