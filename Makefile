@@ -4,7 +4,11 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: test install clean-venv
+PRESET ?= quick
+SCENES ?=
+JOBS   ?= 1
+
+.PHONY: test install dataset clean-venv
 
 install: $(STAMP)
 
@@ -16,6 +20,10 @@ $(STAMP): pyproject.toml
 
 test: $(STAMP)
 	NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache $(PY) -m pytest -q tests
+
+# The synthetic dataset: `make dataset`, `make dataset PRESET=paper`, `make dataset SCENES=lego,garage`.
+dataset: $(STAMP)
+	$(VENV)/bin/e4dgs dataset --preset $(PRESET) $(if $(SCENES),--scenes $(SCENES)) --jobs $(JOBS) --out data/$(PRESET)
 
 clean-venv:
 	rm -rf $(VENV)

@@ -78,8 +78,8 @@ class SceneJob:
     """State of one scene's generation; `run()` does the work (resuming if a checkpoint matches)."""
 
     def __init__(self, cfg: SceneConfig, out_root: Path, preset: str = "custom", checkpoint_every: int = 100,
-                 progress: bool = True):
-        self.cfg, self.preset, self.progress = cfg, preset, progress
+                 progress: bool = True, position: int = 0):
+        self.cfg, self.preset, self.progress, self.position = cfg, preset, progress, position
         self.dir = Path(out_root) / cfg.name
         self.checkpoint_every = max(1, int(checkpoint_every))
         self.t_us = timestamps_us(cfg)
@@ -140,7 +140,7 @@ class SceneJob:
         seconds = {name: float(state.get(f"seconds_{name}", 0.0)) for name in ("render", "simulate", "write", "total")}
         kept_set = {int(i): j for j, i in enumerate(self.kept)}
         bar = tqdm(range(start, cfg.n_timestamps), desc=cfg.name, unit="ts", initial=start, total=cfg.n_timestamps,
-                   disable=not self.progress, dynamic_ncols=True)
+                   disable=not self.progress, dynamic_ncols=True, position=self.position)
         try:
             for i in bar:
                 t0 = time.perf_counter()
@@ -264,6 +264,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, required=True, help="dataset root; the scene goes to OUT/<scene>")
     ap.add_argument("--checkpoint-every", type=int, default=100, metavar="N", help="timestamps between checkpoints")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--position", type=int, default=0, help="progress-bar line (when several scenes run side by side)")
     args = ap.parse_args(argv)
     from e4dgs.config import ConfigError
 
@@ -273,7 +274,7 @@ def main(argv=None) -> int:
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress).run()
+    SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position).run()
     return 0
 
 

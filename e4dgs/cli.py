@@ -6,12 +6,14 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from datagen.cli import add_dataset_parser
     from simulator.cli import add_simulate_parser, add_view_parser
 
     parser = argparse.ArgumentParser(prog="e4dgs", description="Event-camera 4D reconstruction toolkit")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_simulate_parser(sub)
     add_view_parser(sub)
+    add_dataset_parser(sub)
     return parser
 
 
