@@ -25,6 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 import e4dgs
+from blender_scenes.common import consolidate
 from datagen import render as R
 from datagen.blur import BlurStack, exposure_frames, exposure_window
 from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, rig_poses
@@ -119,6 +120,7 @@ class SceneJob:
         R.reset_scene()
         R.setup_render(cfg)
         importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)
+        consolidate()  # fewer, larger objects render faster in Workbench
         cams = R.make_cameras(cfg.camera.n_cameras, self.intr)
         renderer = R.ViewRenderer()
         C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
@@ -137,6 +139,8 @@ class SceneJob:
         for (level, k), stack in stacks.items():
             stack.load_state(state, f"blur__{level}__{k}__")
         start = int(state.get("next_index", 0))
+        if start:
+            print(f"{cfg.name}: resuming at timestamp {start} of {cfg.n_timestamps}", flush=True)
         seconds = {name: float(state.get(f"seconds_{name}", 0.0)) for name in ("render", "simulate", "write", "total")}
         kept_set = {int(i): j for j, i in enumerate(self.kept)}
         bar = tqdm(range(start, cfg.n_timestamps), desc=cfg.name, unit="ts", initial=start, total=cfg.n_timestamps,

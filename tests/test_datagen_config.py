@@ -1,0 +1,78 @@
+"""Scene YAMLs, presets and the blur bookkeeping (no Blender needed)."""
+import numpy as np
+import pytest
+
+from datagen.blur import BlurStack, exposure_frames, exposure_window
+from datagen.config import SCENE_NAMES, load_preset, resolve_scene
+from e4dgs.config import ConfigError
+
+
+def test_every_scene_yaml_loads_with_every_preset():
+    for preset in ("quick", "paper"):
+        p = load_preset(preset)
+        assert set(p.scenes) == set(SCENE_NAMES)
+        for name in p.scenes:
+            cfg = resolve_scene(name, p.overrides)
+            assert cfg.name == name and cfg.kind in ("object", "room")
+            assert cfg.render.width == 346 and cfg.render.height == 260 and cfg.render.fps == 3000
+            assert cfg.camera.n_cameras == 6
+    kinds = {name: resolve_scene(name).kind for name in SCENE_NAMES}
+    assert [n for n, k in kinds.items() if k == "room"] == ["capsule", "restroom", "garage"]
+
+
+def test_preset_overrides_are_merged_into_the_scene():
+    quick = resolve_scene("lego", load_preset("quick").overrides)
+    full = resolve_scene("lego")
+    assert quick.duration_s < full.duration_s and quick.camera == full.camera
+    assert quick.n_timestamps == round(quick.duration_s * 3000) + 1
+
+
+@pytest.mark.parametrize("text, words", [
+    ("name: x\nkind: object\nfoo: 1\n", "foo: unknown key"),
+    ("name: x\nkind: object\ncamera: {radius: 2, fov: 40}\n", "camera.fov: unknown key"),
+    ("name: x\nkind: garden\n", "kind: expected one of"),
+    ("name: x\nkind: object\nblur_ms: {mild: -1}\n", "blur_ms.mild"),
+    ("name: x\nkind: object\nsensor: {pos_threshold: 0}\n", "sensor.pos_threshold"),
+    ("name: x\nkind: object\nrender: {engine: workbench, samples: 7}\n", "render.samples"),
+])
+def test_bad_scene_yaml_names_file_and_key(tmp_path, text, words):
+    p = tmp_path / "scene.yaml"
+    p.write_text(text)
+    with pytest.raises(ConfigError, match=words) as err:
+        resolve_scene("x", scene_file=p)
+    assert str(p) in str(err.value)
+
+
+def test_unknown_scene_and_preset_are_clear_errors(tmp_path):
+    with pytest.raises(ConfigError, match="unknown scene 'kitchen'"):
+        resolve_scene("kitchen")
+    with pytest.raises(ConfigError, match="unknown dataset preset 'huge'.*known presets"):
+        load_preset("huge")
+    bad = tmp_path / "p.yaml"
+    bad.write_text("scenes: [lego, kitchen]\n")
+    with pytest.raises(ConfigError, match="kitchen"):
+        load_preset(bad)
+
+
+def test_exposure_windows_stay_inside_the_clip():
+    assert exposure_frames(5.0, 3000) == 15 and exposure_frames(0.01, 3000) == 1
+    assert exposure_window(50, 15, 301) == (43, 57)
+    assert exposure_window(0, 15, 301) == (0, 14)        # shifted, not shortened
+    assert exposure_window(300, 15, 301) == (286, 300)
+    assert exposure_window(5, 30, 12) == (0, 11)         # longer than the clip: the whole clip
+
+
+def test_blur_stack_means_equal_numpy_means(rng):
+    frames = rng.random((12, 4, 5, 3)).astype(np.float32)
+    windows = {0: (0, 2), 1: (2, 7), 2: (9, 11)}
+    stack = BlurStack(windows)
+    done = {}
+    for i, f in enumerate(frames):
+        done.update(dict(stack.add(i, f)))
+        if i == 5:  # checkpoint and restore half-way
+            state = stack.state("b__")
+            stack = BlurStack(windows)
+            stack.load_state(state, "b__")
+    assert set(done) == {0, 1, 2} and not stack.sums
+    for key, (a, b) in windows.items():
+        np.testing.assert_allclose(done[key], frames[a:b + 1].mean(0), rtol=1e-6)
