@@ -145,3 +145,42 @@ class ViewRenderer:
         self._path.unlink(missing_ok=True)
         with contextlib.suppress(OSError):
             self._dir.rmdir()
+
+
+def render_clip(cfg: SceneConfig, tau: np.ndarray, camera_ids=(0,), camera_tau: np.ndarray | None = None,
+                progress: bool = False) -> tuple[np.ndarray, float]:
+    """Build `cfg`'s scene and render cameras `camera_ids` at normalised times tau [T].
+
+    camera_tau [T] (default tau) places the cameras, so a frozen camera over a moving scene (or
+    the reverse) can be rendered. Returns (linear RGB frames [C, T, H, W, 3] float32 including the
+    scene's exposure gain, render seconds).
+    """
+    import importlib
+    import time
+
+    from blender_scenes.common import consolidate
+    from datagen.cameras import intrinsics_from_fov, rig_poses
+
+    reset_scene()
+    setup_render(cfg)
+    importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)
+    consolidate()
+    intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
+    cams = make_cameras(cfg.camera.n_cameras, intr)
+    poses = rig_poses(cfg.camera, tau if camera_tau is None else camera_tau)
+    renderer = ViewRenderer()
+    out = np.empty((len(camera_ids), len(tau), cfg.render.height, cfg.render.width, 3), np.float32)
+    seconds = 0.0
+    try:
+        for i, t in enumerate(tau):
+            set_time(float(t))
+            for c, k in enumerate(camera_ids):
+                set_pose(cams[k], poses[k, i])
+                t0 = time.perf_counter()
+                out[c, i] = renderer.render(cams[k]) * np.float32(cfg.lighting.exposure)
+                seconds += time.perf_counter() - t0
+            if progress and i % 20 == 0:
+                print(f"  rendered {i + 1}/{len(tau)}", flush=True)
+    finally:
+        renderer.close()
+    return out, seconds

@@ -1,0 +1,34 @@
+"""Summarise a generated dataset: time per scene, events per camera, size on disk (prints a table).
+
+    python -m benchmark.dataset_summary data/quick
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("root", type=Path)
+    args = ap.parse_args(argv)
+    print(f"dataset {args.root}")
+    print("| scene | timestamps | render s | simulate s | write s | total s | events per camera (M) | size MB | preview |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    total_s = total_mb = 0.0
+    for d in sorted(p for p in args.root.iterdir() if (p / "manifest.json").exists()):
+        m = json.loads((d / "manifest.json").read_text())
+        mb = sum(p.stat().st_size for p in d.rglob("*") if p.is_file()) / 1e6
+        s = m["seconds"]
+        ev = ", ".join(f"{n / 1e6:.2f}" for n in m["counts"]["events_per_camera"])
+        print(f"| {m['scene']} | {m['counts']['timestamps']} | {s['render']:.0f} | {s['simulate']:.1f} | {s['write']:.1f} | "
+              f"{s['total']:.0f} | {ev} | {mb:.0f} | {d / 'preview' / 'contact_sheet.png'} |")
+        total_s += s["total"]
+        total_mb += mb
+    print(f"\ntotal: {total_s / 60:.1f} min of generation, {total_mb / 1e3:.2f} GB on disk")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,171 @@
+"""The dataset generator end to end on tiny scenes (Blender in subprocesses), and every scene builder."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from datagen.cameras import load_cameras, project
+from datagen.config import SCENE_NAMES, load_preset, resolve_scene
+from e4dgs.imageio import read_exr, read_png_linear
+from simulator.events import validate_events
+from simulator.h5io import read_events, read_info
+from simulator.pixel import linear_to_srgb
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def generate(out, scene="cubes", preset="tiny", extra=(), **kw):
+    cmd = [sys.executable, "-m", "datagen.generate", "--scene", scene, "--preset", preset, "--out", str(out),
+           "--no-progress", *extra]
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, **kw)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tiny")
+    r = generate(out)
+    assert r.returncode == 0, r.stderr
+    return out / "cubes"
+
+
+def test_tiny_scene_layout_is_complete(tiny):
+    cfg = resolve_scene("cubes", load_preset("tiny").overrides)
+    manifest = json.loads((tiny / "manifest.json").read_text())
+    for name in ("scene.yaml", "cameras.json", "transforms_train.json", "transforms_test.json",
+                 "preview/contact_sheet.png", "events/cam0.h5", "events/cam1.h5"):
+        assert (tiny / name).is_file(), name
+        assert name in manifest["files"]
+    kept = len(range(0, cfg.n_timestamps, cfg.frames.keep_every))
+    for k in range(2):
+        for sub, ext in (("frames", "exr"), ("rgb", "png"), ("gray", "png")):
+            assert len(list((tiny / sub / f"cam{k}").glob(f"*.{ext}"))) == kept
+        for level in cfg.blur_ms:
+            assert len(list((tiny / "blur" / level / f"cam{k}").glob("*.png"))) == kept
+    assert manifest["counts"]["timestamps"] == cfg.n_timestamps == 13
+    assert set(manifest["seconds"]) == {"render", "simulate", "write", "total"}
+    assert not list(tiny.glob(".*"))  # no spool or checkpoint left behind
+    train = json.loads((tiny / "transforms_train.json").read_text())
+    test = json.loads((tiny / "transforms_test.json").read_text())
+    assert len(train["frames"]) + len(test["frames"]) == 2 * kept
+    assert all(f["index"] % cfg.frames.test_every == 0 for f in test["frames"])
+    assert all(0.0 <= f["time"] <= 1.0 for f in train["frames"] + test["frames"])
+    for f in test["frames"]:
+        assert (tiny / (f["file_path"] + ".png")).exists() and (tiny / (f["gray_path"] + ".png")).exists()
+
+
+def test_tiny_scene_events_are_valid_and_non_empty(tiny):
+    for k in range(2):
+        stream = read_events(tiny / "events" / f"cam{k}.h5")
+        validate_events(stream.events, 64, 48)
+        assert len(stream) > 1000 and {-1, 1} <= set(np.unique(stream.events["p"]).tolist())
+        assert stream.events["t"].max() <= 4000
+        info = read_info(tiny / "events" / f"cam{k}.h5")
+        assert info["sim_pos_threshold"] == 0.2 and info["camera"] == k
+
+
+def test_blurred_frames_are_the_mean_of_their_sharp_frames(tmp_path):
+    # keep every rendered frame so the test can average them itself
+    preset = tmp_path / "p.yaml"
+    preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.004\n  render: {width: 64, height: 48, samples: 5}\n"
+                      "  camera: {n_cameras: 1}\n  frames: {keep_every: 1, test_every: 4}\n  blur_ms: {mild: 1.0, strong: 3.0}\n")
+    r = generate(tmp_path, preset=str(preset))
+    assert r.returncode == 0, r.stderr
+    d = tmp_path / "cubes"
+    sharp = np.stack([read_exr(d / "frames" / "cam0" / f"{j:05d}.exr") for j in range(13)])
+    for level in ("mild", "strong"):
+        for e in json.loads((d / "blur" / level / "exposures.json").read_text()):
+            first, last = round(e["first_frame_us"] * 3e-3), round(e["last_frame_us"] * 3e-3)
+            assert last - first + 1 == e["n_frames"] == {"mild": 3, "strong": 9}[level]
+            expected = linear_to_srgb(sharp[first:last + 1].astype(np.float64).mean(0))
+            got = cv2.imread(str(d / "blur" / level / "cam0" / f"{e['index']:05d}.png"))[..., ::-1] / 255.0
+            # 8-bit output and half-float sharp frames: within 1.5 grey levels
+            assert np.abs(got - expected).max() <= 1.5 / 255
+
+
+def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
+    from blender_scenes.calibration import MARKERS
+
+    r = generate(tmp_path, scene="calibration", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+                 extra=["--scene-config", str(ROOT / "blender_scenes" / "calibration.yaml")])
+    assert r.returncode == 0, r.stderr
+    d = tmp_path / "calibration"
+    cams = load_cameras(d / "cameras.json")
+    frames = json.loads((d / "transforms_train.json").read_text())["frames"] + \
+        json.loads((d / "transforms_test.json").read_text())["frames"]
+    assert len(frames) == 3 * 3
+    for f in frames:
+        img = read_png_linear(d / (f["file_path"] + ".png"))
+        cam = cams[f["camera"]]
+        c2w = cam.pose_at(f["timestamp_us"])
+        for channel, (name, (pos, _)) in enumerate(MARKERS.items()):
+            mask = (img[..., channel] > 0.2) & (img[..., channel] > 3 * np.delete(img, channel, axis=-1).max(-1))
+            assert mask.sum() > 5, name
+            v, u = np.nonzero(mask)
+            centroid = np.array([u.mean() + 0.5, v.mean() + 0.5])  # pixel centres sample (u + 0.5, v + 0.5)
+            uv, depth = project(cam.intrinsics.K, c2w, np.array([pos]))
+            assert depth[0] > 0
+            np.testing.assert_allclose(centroid, uv[0], atol=0.6)
+
+
+def test_killed_run_resumes_to_identical_files(tmp_path):
+    preset = tmp_path / "p.yaml"
+    preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.03\n  render: {width: 64, height: 48, samples: 1}\n"
+                      "  camera: {n_cameras: 2}\n  frames: {keep_every: 10, test_every: 2}\n  blur_ms: {strong: 3.0}\n"
+                      "  sensor: {shot_noise_rate_hz: 50.0, refractory_us: 40}\n")
+    assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
+    cmd = [sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(preset),
+           "--out", str(tmp_path / "b"), "--no-progress", "--checkpoint-every", "7"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ckpt = tmp_path / "b" / "cubes" / ".generate.ckpt.npz"
+    deadline = time.time() + 120
+    while not ckpt.exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.005)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert ckpt.exists(), "the run ended before its first checkpoint: nothing to resume"
+    assert not (tmp_path / "b" / "cubes" / "manifest.json").exists()
+    r = generate(tmp_path / "b", preset=str(preset))
+    assert r.returncode == 0 and "resuming at timestamp" in r.stdout
+    ma = json.loads((tmp_path / "a" / "cubes" / "manifest.json").read_text())["files"]
+    mb = json.loads((tmp_path / "b" / "cubes" / "manifest.json").read_text())["files"]
+    assert ma.keys() == mb.keys()
+    assert [k for k in ma if ma[k]["sha256"] != mb[k]["sha256"]] == []
+
+
+def test_bad_config_or_scene_fails_clearly_and_writes_nothing(tmp_path):
+    r = generate(tmp_path / "out", scene="kitchen")
+    assert r.returncode == 2 and "unknown scene 'kitchen'" in r.stderr
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROOT / "blender_scenes" / "cubes.yaml").read_text() + "colour_grading: warm\n")
+    r = generate(tmp_path / "out", extra=["--scene-config", str(bad)])
+    assert r.returncode == 2 and "colour_grading: unknown key" in r.stderr and str(bad) in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_every_scene_builds_and_renders(name, tmp_path):
+    code = (
+        "import sys, numpy as np, importlib\n"
+        "from datagen.config import resolve_scene\n"
+        "from datagen import render as R\n"
+        "from datagen.cameras import intrinsics_from_fov, rig_poses\n"
+        f"cfg = resolve_scene('{name}', {{'render': {{'width': 48, 'height': 36, 'samples': 1}}}})\n"
+        "R.reset_scene(); R.setup_render(cfg)\n"
+        f"importlib.import_module('blender_scenes.{name}').build(cfg)\n"
+        "cams = R.make_cameras(1, intrinsics_from_fov(48, 36, cfg.camera.fov_x_deg))\n"
+        "R.set_time(0.5); R.set_pose(cams[0], rig_poses(cfg.camera, np.array([0.5]))[0, 0])\n"
+        "img = R.ViewRenderer().render(cams[0])\n"
+        "np.save(sys.argv[1], img)\n"
+    )
+    out = tmp_path / "img.npy"
+    r = subprocess.run([sys.executable, "-c", code, str(out)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    img = np.load(out)
+    assert img.shape == (36, 48, 3) and np.all(np.isfinite(img)) and img.std() > 0.01
