@@ -149,6 +149,7 @@ class SceneJob:
             for i in bar:
                 t0 = time.perf_counter()
                 R.set_time(float(self.tau[i]))
+                R.set_noise_seed(cfg.seed * 100_003 + i)
                 frames = []
                 for k, cam in enumerate(cams):
                     R.set_pose(cam, self.poses[k, i])

@@ -78,8 +78,7 @@ def setup_render(cfg: SceneConfig) -> None:
         sc.cycles.samples = r.samples
         sc.cycles.use_denoising = False
         sc.cycles.use_adaptive_sampling = False
-        sc.cycles.use_animated_seed = True  # independent noise per frame, as a real render farm would give
-        sc.cycles.seed = cfg.seed
+        sc.cycles.use_animated_seed = False  # `set_noise_seed` gives every timestamp its own seed
     else:
         sc.eevee.taa_render_samples = r.samples
 
@@ -103,6 +102,13 @@ def make_cameras(n: int, intr: Intrinsics) -> list[bpy.types.Object]:
 
 def set_pose(cam: bpy.types.Object, c2w_opencv: np.ndarray) -> None:
     cam.matrix_world = mathutils.Matrix((c2w_opencv @ FLIP_YZ).tolist())
+
+
+def set_noise_seed(seed: int) -> None:
+    """Independent path-tracing noise per rendered timestamp (Cycles; other engines have none)."""
+    sc = bpy.context.scene
+    if sc.render.engine == "CYCLES":
+        sc.cycles.seed = int(seed) % (2**31 - 1)
 
 
 def set_time(tau: float) -> None:
@@ -174,6 +180,7 @@ def render_clip(cfg: SceneConfig, tau: np.ndarray, camera_ids=(0,), camera_tau: 
     try:
         for i, t in enumerate(tau):
             set_time(float(t))
+            set_noise_seed(cfg.seed * 100_003 + i)
             for c, k in enumerate(camera_ids):
                 set_pose(cams[k], poses[k, i])
                 t0 = time.perf_counter()
