@@ -72,7 +72,9 @@ class CameraRigConfig:
 
 @dataclass(frozen=True)
 class LightingConfig:
-    """Workbench studio lighting, fixed in world space so every camera sees the same shading."""
+    """Workbench studio lighting, fixed in world space so every camera sees the same shading
+    (`shading: flat` shows unlit texture colours)."""
+    shading: Literal["studio", "flat"] = "studio"
     studio_light: str = "Default"
     rotate_z_deg: float = 30.0
     shadows: bool = True

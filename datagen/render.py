@@ -63,7 +63,7 @@ def setup_render(cfg: SceneConfig) -> None:
         lt = cfg.lighting
         sc.display.render_aa = {1: "OFF"}.get(r.samples, str(r.samples))
         sh = sc.display.shading
-        sh.light = "STUDIO"
+        sh.light = "STUDIO" if lt.shading == "studio" else "FLAT"
         sh.studio_light = lt.studio_light
         sh.use_world_space_lighting = True   # shading fixed in the world, not to the moving camera
         sh.studiolight_rotate_z = math.radians(lt.rotate_z_deg)

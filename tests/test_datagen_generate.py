@@ -100,18 +100,22 @@ def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
     frames = json.loads((d / "transforms_train.json").read_text())["frames"] + \
         json.loads((d / "transforms_test.json").read_text())["frames"]
     assert len(frames) == 3 * 3
+    errors = []
     for f in frames:
         img = read_png_linear(d / (f["file_path"] + ".png"))
         cam = cams[f["camera"]]
         c2w = cam.pose_at(f["timestamp_us"])
         for channel, (name, (pos, _)) in enumerate(MARKERS.items()):
-            mask = (img[..., channel] > 0.2) & (img[..., channel] > 3 * np.delete(img, channel, axis=-1).max(-1))
+            c = img[..., channel]
+            mask = (c > 0.5 * c.max()) & (c > 3 * np.delete(img, channel, axis=-1).max(-1))
             assert mask.sum() > 5, name
             v, u = np.nonzero(mask)
             centroid = np.array([u.mean() + 0.5, v.mean() + 0.5])  # pixel centres sample (u + 0.5, v + 0.5)
             uv, depth = project(cam.intrinsics.K, c2w, np.array([pos]))
             assert depth[0] > 0
-            np.testing.assert_allclose(centroid, uv[0], atol=0.6)
+            errors.append(np.abs(centroid - uv[0]).max())
+    print(f"projection error: max {max(errors):.3f} px over {len(errors)} markers")
+    assert max(errors) < 0.6
 
 
 def test_killed_run_resumes_to_identical_files(tmp_path):
