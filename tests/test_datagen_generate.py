@@ -96,6 +96,7 @@ def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
                  extra=["--scene-config", str(ROOT / "blender_scenes" / "calibration.yaml")])
     assert r.returncode == 0, r.stderr
     d = tmp_path / "calibration"
+    assert not (d / "blur").exists()  # no blur levels asked for: no blur buffers, no blur files
     cams = load_cameras(d / "cameras.json")
     frames = json.loads((d / "transforms_train.json").read_text())["frames"] + \
         json.loads((d / "transforms_test.json").read_text())["frames"]
