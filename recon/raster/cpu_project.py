@@ -1,4 +1,8 @@
-"""Numba kernels of the EWA projection, forward and hand-written backward (see projection.py)."""
+"""Numba kernels of the EWA projection, forward and hand-written backward (see projection.py).
+
+Written with scalars only: no per-Gaussian arrays or small matrix products (numba would allocate
+them and call BLAS), so one Gaussian costs a few hundred flops.
+"""
 from __future__ import annotations
 
 import math
@@ -17,67 +21,67 @@ def _rotation(q0, q1, q2, q3):
     n = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     d = max(n, QUAT_EPS)
     w, x, y, z = q0 / d, q1 / d, q2 / d, q3 / d
-    R = np.empty((3, 3))
-    R[0, 0] = 1 - 2 * (y * y + z * z)
-    R[0, 1] = 2 * (x * y - w * z)
-    R[0, 2] = 2 * (x * z + w * y)
-    R[1, 0] = 2 * (x * y + w * z)
-    R[1, 1] = 1 - 2 * (x * x + z * z)
-    R[1, 2] = 2 * (y * z - w * x)
-    R[2, 0] = 2 * (x * z - w * y)
-    R[2, 1] = 2 * (y * z + w * x)
-    R[2, 2] = 1 - 2 * (x * x + y * y)
-    return R, w, x, y, z, n
+    return (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y), w, x, y, z, n)
 
 
 @numba.njit(**_opts)
-def _camera_cov(Wr, R, s):
-    """V = Wr R S S^T R^T Wr^T and M = R S."""
-    M = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            M[i, j] = R[i, j] * s[j]
-    cov = M @ M.T
-    return Wr @ cov @ Wr.T, M
+def _setup(i, means, quats, scales, W, fx, fy, lim_x, lim_y):
+    """Everything the forward and the backward share for Gaussian i (all scalars)."""
+    tx = W[0, 0] * means[i, 0] + W[0, 1] * means[i, 1] + W[0, 2] * means[i, 2] + W[0, 3]
+    ty = W[1, 0] * means[i, 0] + W[1, 1] * means[i, 1] + W[1, 2] * means[i, 2] + W[1, 3]
+    tz = W[2, 0] * means[i, 0] + W[2, 1] * means[i, 1] + W[2, 2] * means[i, 2] + W[2, 3]
+    rx, ry = tx / tz, ty / tz
+    ux = min(max(rx, -lim_x), lim_x)
+    uy = min(max(ry, -lim_y), lim_y)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22, w, x, y, z, qn = _rotation(quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3])
+    s0, s1, s2 = scales[i, 0], scales[i, 1], scales[i, 2]
+    # A = Wr R S (3x3): camera-space axes of the Gaussian; V = A A^T
+    m00, m01, m02 = r00 * s0, r01 * s1, r02 * s2
+    m10, m11, m12 = r10 * s0, r11 * s1, r12 * s2
+    m20, m21, m22 = r20 * s0, r21 * s1, r22 * s2
+    a00 = W[0, 0] * m00 + W[0, 1] * m10 + W[0, 2] * m20
+    a01 = W[0, 0] * m01 + W[0, 1] * m11 + W[0, 2] * m21
+    a02 = W[0, 0] * m02 + W[0, 1] * m12 + W[0, 2] * m22
+    a10 = W[1, 0] * m00 + W[1, 1] * m10 + W[1, 2] * m20
+    a11 = W[1, 0] * m01 + W[1, 1] * m11 + W[1, 2] * m21
+    a12 = W[1, 0] * m02 + W[1, 1] * m12 + W[1, 2] * m22
+    a20 = W[2, 0] * m00 + W[2, 1] * m10 + W[2, 2] * m20
+    a21 = W[2, 0] * m01 + W[2, 1] * m11 + W[2, 2] * m21
+    a22 = W[2, 0] * m02 + W[2, 1] * m12 + W[2, 2] * m22
+    # B = J A (2x3), J = [[fx/tz, 0, -fx ux/tz], [0, fy/tz, -fy uy/tz]]
+    j00, j02, j11, j12 = fx / tz, -fx * ux / tz, fy / tz, -fy * uy / tz
+    b00, b01, b02 = j00 * a00 + j02 * a20, j00 * a01 + j02 * a21, j00 * a02 + j02 * a22
+    b10, b11, b12 = j11 * a10 + j12 * a20, j11 * a11 + j12 * a21, j11 * a12 + j12 * a22
+    sa = b00 * b00 + b01 * b01 + b02 * b02 + LOWPASS
+    sb = b00 * b10 + b01 * b11 + b02 * b12
+    sc = b10 * b10 + b11 * b11 + b12 * b12 + LOWPASS
+    return (tx, ty, tz, rx, ry, ux, uy, j00, j02, j11, j12,
+            (r00, r01, r02, r10, r11, r12, r20, r21, r22), (w, x, y, z, qn), (s0, s1, s2),
+            (a00, a01, a02, a10, a11, a12, a20, a21, a22), (b00, b01, b02, b10, b11, b12), sa, sb, sc)
 
 
 @numba.njit(parallel=True, **_opts)
 def project_forward(means, quats, scales, W, fx, fy, cx, cy, width, height, means2d, conics, depths, radii):
-    Wr = W[:3, :3].astype(np.float64)
     lim_x = 1.3 * (0.5 * width / fx)
     lim_y = 1.3 * (0.5 * height / fy)
     for i in numba.prange(means.shape[0]):
-        t = np.empty(3)
-        for r in range(3):
-            t[r] = W[r, 0] * means[i, 0] + W[r, 1] * means[i, 1] + W[r, 2] * means[i, 2] + W[r, 3]
-        tz = t[2]
+        tz = W[2, 0] * means[i, 0] + W[2, 1] * means[i, 1] + W[2, 2] * means[i, 2] + W[2, 3]
         depths[i] = tz
         if not tz >= NEAR_PLANE:
             radii[i] = 0
             means2d[i, 0] = means2d[i, 1] = 0.0
             conics[i, 0] = conics[i, 1] = conics[i, 2] = 0.0
             continue
-        ux = min(max(t[0] / tz, -lim_x), lim_x)
-        uy = min(max(t[1] / tz, -lim_y), lim_y)
-        J = np.zeros((2, 3))
-        J[0, 0] = fx / tz
-        J[0, 2] = -fx * ux / tz
-        J[1, 1] = fy / tz
-        J[1, 2] = -fy * uy / tz
-        R, _, _, _, _, _ = _rotation(quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3])
-        s = np.empty(3)
-        s[0], s[1], s[2] = scales[i, 0], scales[i, 1], scales[i, 2]
-        V, _ = _camera_cov(Wr, R, s)
-        cov2 = J @ V @ J.T
-        sa = cov2[0, 0] + LOWPASS
-        sb = cov2[0, 1]
-        sc = cov2[1, 1] + LOWPASS
+        tx, ty, tz, rx, ry, ux, uy, j00, j02, j11, j12, R, Q, S, A, B, sa, sb, sc = _setup(
+            i, means, quats, scales, W, fx, fy, lim_x, lim_y)
         det = sa * sc - sb * sb
         conics[i, 0] = sc / det
         conics[i, 1] = -sb / det
         conics[i, 2] = sa / det
-        means2d[i, 0] = fx * t[0] / tz + cx
-        means2d[i, 1] = fy * t[1] / tz + cy
+        means2d[i, 0] = fx * tx / tz + cx
+        means2d[i, 1] = fy * ty / tz + cy
         mid = 0.5 * (sa + sc)
         lam = mid + math.sqrt(max(mid * mid - det, 0.1))
         r = math.ceil(3.0 * math.sqrt(lam))
@@ -87,37 +91,23 @@ def project_forward(means, quats, scales, W, fx, fy, cx, cy, width, height, mean
 @numba.njit(parallel=True, **_opts)
 def project_backward(means, quats, scales, W, fx, fy, width, height, radii, g_means2d, g_conics, g_depths,
                      g_means, g_quats, g_scales):
-    Wr = W[:3, :3].astype(np.float64)
     lim_x = 1.3 * (0.5 * width / fx)
     lim_y = 1.3 * (0.5 * height / fy)
     for i in numba.prange(means.shape[0]):
-        for k in range(3):
-            g_means[i, k] = 0.0
-            g_scales[i, k] = 0.0
-        for k in range(4):
-            g_quats[i, k] = 0.0
         if radii[i] <= 0:
+            for k in range(3):
+                g_means[i, k] = 0.0
+                g_scales[i, k] = 0.0
+            for k in range(4):
+                g_quats[i, k] = 0.0
             continue
-        t = np.empty(3)
-        for r in range(3):
-            t[r] = W[r, 0] * means[i, 0] + W[r, 1] * means[i, 1] + W[r, 2] * means[i, 2] + W[r, 3]
-        tx, ty, tz = t[0], t[1], t[2]
-        rx, ry = tx / tz, ty / tz
-        ux = min(max(rx, -lim_x), lim_x)
-        uy = min(max(ry, -lim_y), lim_y)
-        J = np.zeros((2, 3))
-        J[0, 0] = fx / tz
-        J[0, 2] = -fx * ux / tz
-        J[1, 1] = fy / tz
-        J[1, 2] = -fy * uy / tz
-        R, w, x, y, z, qn = _rotation(quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3])
-        s = np.empty(3)
-        s[0], s[1], s[2] = scales[i, 0], scales[i, 1], scales[i, 2]
-        V, M = _camera_cov(Wr, R, s)
-        cov2 = J @ V @ J.T
-        sa = cov2[0, 0] + LOWPASS
-        sb = cov2[0, 1]
-        sc = cov2[1, 1] + LOWPASS
+        tx, ty, tz, rx, ry, ux, uy, j00, j02, j11, j12, R, Q, S, A, B, sa, sb, sc = _setup(
+            i, means, quats, scales, W, fx, fy, lim_x, lim_y)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        w, x, y, z, qn = Q
+        s0, s1, s2 = S
+        a00, a01, a02, a10, a11, a12, a20, a21, a22 = A
+        b00, b01, b02, b10, b11, b12 = B
         det = sa * sc - sb * sb
         d2 = det * det
         ga, gb, gc = g_conics[i, 0], g_conics[i, 1], g_conics[i, 2]
@@ -125,29 +115,41 @@ def project_backward(means, quats, scales, W, fx, fy, width, height, radii, g_me
         g_sa = ga * (-sc * sc / d2) + gb * (sb * sc / d2) + gc * (1.0 / det - sa * sc / d2)
         g_sc = ga * (1.0 / det - sc * sa / d2) + gb * (sb * sa / d2) + gc * (-sa * sa / d2)
         g_sb = ga * (2.0 * sb * sc / d2) + gb * (-1.0 / det - 2.0 * sb * sb / d2) + gc * (2.0 * sa * sb / d2)
-        Gs = np.empty((2, 2))
-        Gs[0, 0] = 2.0 * g_sa
-        Gs[0, 1] = g_sb
-        Gs[1, 0] = g_sb
-        Gs[1, 1] = 2.0 * g_sc
-        gJ = Gs @ J @ V                                  # dL/dJ
-        gM = Wr.T @ (J.T @ Gs @ J) @ Wr @ M              # dL/dM, M = R S
-        for j in range(3):
-            acc = 0.0
-            for r in range(3):
-                acc += gM[r, j] * R[r, j]
-            g_scales[i, j] = acc
-        G = np.empty((3, 3))
-        for r in range(3):
-            for j in range(3):
-                G[r, j] = gM[r, j] * s[j]
-        gw = 2 * (-z * G[0, 1] + y * G[0, 2] + z * G[1, 0] - x * G[1, 2] - y * G[2, 0] + x * G[2, 1])
-        gx = 2 * (y * G[0, 1] + z * G[0, 2] + y * G[1, 0] - 2 * x * G[1, 1] - w * G[1, 2] + z * G[2, 0]
-                  + w * G[2, 1] - 2 * x * G[2, 2])
-        gy = 2 * (-2 * y * G[0, 0] + x * G[0, 1] + w * G[0, 2] + x * G[1, 0] + z * G[1, 2] - w * G[2, 0]
-                  + z * G[2, 1] - 2 * y * G[2, 2])
-        gz = 2 * (-2 * z * G[0, 0] - w * G[0, 1] + x * G[0, 2] + w * G[1, 0] - 2 * z * G[1, 1] + y * G[1, 2]
-                  + x * G[2, 0] + y * G[2, 1])
+        # cov2 = B B^T with B = J A; Gs = [[2 g_sa, g_sb], [g_sb, 2 g_sc]]: dL/dB = Gs B
+        e00, e01, e11 = 2.0 * g_sa, g_sb, 2.0 * g_sc
+        gb00, gb01, gb02 = e00 * b00 + e01 * b10, e00 * b01 + e01 * b11, e00 * b02 + e01 * b12
+        gb10, gb11, gb12 = e01 * b00 + e11 * b10, e01 * b01 + e11 * b11, e01 * b02 + e11 * b12
+        # B = J A: dL/dJ = dL/dB A^T (only the non-zero entries of J), dL/dA = J^T dL/dB
+        gj00 = gb00 * a00 + gb01 * a01 + gb02 * a02
+        gj02 = gb00 * a20 + gb01 * a21 + gb02 * a22
+        gj11 = gb10 * a10 + gb11 * a11 + gb12 * a12
+        gj12 = gb10 * a20 + gb11 * a21 + gb12 * a22
+        ga00, ga01, ga02 = j00 * gb00, j00 * gb01, j00 * gb02
+        ga10, ga11, ga12 = j11 * gb10, j11 * gb11, j11 * gb12
+        ga20 = j02 * gb00 + j12 * gb10
+        ga21 = j02 * gb01 + j12 * gb11
+        ga22 = j02 * gb02 + j12 * gb12
+        # A = Wr M: dL/dM = Wr^T dL/dA
+        gm00 = W[0, 0] * ga00 + W[1, 0] * ga10 + W[2, 0] * ga20
+        gm01 = W[0, 0] * ga01 + W[1, 0] * ga11 + W[2, 0] * ga21
+        gm02 = W[0, 0] * ga02 + W[1, 0] * ga12 + W[2, 0] * ga22
+        gm10 = W[0, 1] * ga00 + W[1, 1] * ga10 + W[2, 1] * ga20
+        gm11 = W[0, 1] * ga01 + W[1, 1] * ga11 + W[2, 1] * ga21
+        gm12 = W[0, 1] * ga02 + W[1, 1] * ga12 + W[2, 1] * ga22
+        gm20 = W[0, 2] * ga00 + W[1, 2] * ga10 + W[2, 2] * ga20
+        gm21 = W[0, 2] * ga01 + W[1, 2] * ga11 + W[2, 2] * ga21
+        gm22 = W[0, 2] * ga02 + W[1, 2] * ga12 + W[2, 2] * ga22
+        # M = R diag(s)
+        g_scales[i, 0] = gm00 * r00 + gm10 * r10 + gm20 * r20
+        g_scales[i, 1] = gm01 * r01 + gm11 * r11 + gm21 * r21
+        g_scales[i, 2] = gm02 * r02 + gm12 * r12 + gm22 * r22
+        G00, G01, G02 = gm00 * s0, gm01 * s1, gm02 * s2
+        G10, G11, G12 = gm10 * s0, gm11 * s1, gm12 * s2
+        G20, G21, G22 = gm20 * s0, gm21 * s1, gm22 * s2
+        gw = 2 * (-z * G01 + y * G02 + z * G10 - x * G12 - y * G20 + x * G21)
+        gx = 2 * (y * G01 + z * G02 + y * G10 - 2 * x * G11 - w * G12 + z * G20 + w * G21 - 2 * x * G22)
+        gy = 2 * (-2 * y * G00 + x * G01 + w * G02 + x * G10 + z * G12 - w * G20 + z * G21 - 2 * y * G22)
+        gz = 2 * (-2 * z * G00 - w * G01 + x * G02 + w * G10 - 2 * z * G11 + y * G12 + x * G20 + y * G21)
         if qn > QUAT_EPS:  # through q / |q|
             dot = w * gw + x * gx + y * gy + z * gz
             g_quats[i, 0] = (gw - w * dot) / qn
@@ -160,22 +162,21 @@ def project_backward(means, quats, scales, W, fx, fy, width, height, radii, g_me
             g_quats[i, 2] = gy / QUAT_EPS
             g_quats[i, 3] = gz / QUAT_EPS
         # J -> t (ux, uy clamped: gradient only inside the clamp range, as torch.clamp)
-        g_tz = g_depths[i]
-        g_tz += gJ[0, 0] * (-fx / (tz * tz)) + gJ[0, 2] * (fx * ux / (tz * tz))
-        g_tz += gJ[1, 1] * (-fy / (tz * tz)) + gJ[1, 2] * (fy * uy / (tz * tz))
+        tz2 = tz * tz
+        g_tz = g_depths[i] + gj00 * (-fx / tz2) + gj02 * (fx * ux / tz2) + gj11 * (-fy / tz2) + gj12 * (fy * uy / tz2)
         g_tx = 0.0
         g_ty = 0.0
-        g_ux = gJ[0, 2] * (-fx / tz)
-        g_uy = gJ[1, 2] * (-fy / tz)
+        g_ux = gj02 * (-fx / tz)
+        g_uy = gj12 * (-fy / tz)
         if -lim_x <= rx <= lim_x:
             g_tx += g_ux / tz
-            g_tz += -g_ux * tx / (tz * tz)
+            g_tz += -g_ux * tx / tz2
         if -lim_y <= ry <= lim_y:
             g_ty += g_uy / tz
-            g_tz += -g_uy * ty / (tz * tz)
+            g_tz += -g_uy * ty / tz2
         gmx, gmy = g_means2d[i, 0], g_means2d[i, 1]
         g_tx += gmx * fx / tz
         g_ty += gmy * fy / tz
-        g_tz += -gmx * fx * tx / (tz * tz) - gmy * fy * ty / (tz * tz)
+        g_tz += -gmx * fx * tx / tz2 - gmy * fy * ty / tz2
         for k in range(3):
             g_means[i, k] = W[0, k] * g_tx + W[1, k] * g_ty + W[2, k] * g_tz

@@ -68,13 +68,18 @@ def bin_tiles(means2d, radii, order, width, height):
 
 
 @numba.njit(**_opts)
-def _row_span(mx, my, a, b, c, opacity, r, v, x0, x1):
+def _min_power(opacity):
+    """Smallest exponent at which opacity * exp(power) still reaches 1/255 (+inf: never)."""
+    return math.log(ALPHA_MIN / opacity) if opacity >= ALPHA_MIN else math.inf
+
+
+@numba.njit(**_opts)
+def _row_span(mx, my, a, b, c, pmin, r, v, x0, x1):
     """Pixel columns [lo, hi] of row v (within [x0, x1] and the footprint) where alpha may reach 1/255."""
     dy = v + 0.5 - my
-    if abs(dy) > r or opacity < ALPHA_MIN:
+    if abs(dy) > r or pmin > 0.0:
         return 1, 0
-    pmin = math.log(ALPHA_MIN / opacity)           # need power >= pmin (<= 0)
-    # a dx^2 + 2 b dy dx + c dy^2 + 2 pmin <= 0
+    # need power >= pmin: a dx^2 + 2 b dy dx + c dy^2 + 2 pmin <= 0
     disc = b * b * dy * dy - a * (c * dy * dy + 2.0 * pmin)
     if disc < 0.0 or a <= 0.0:
         return 1, 0
@@ -127,11 +132,12 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
             g = lists[k]
             mx, my, r = means2d[g, 0], means2d[g, 1], float(radii[g])
             a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
+            pmin = _min_power(op)
             vlo = max(y0, int(math.ceil(my - r - 0.5)))
             vhi = min(y1, int(math.floor(my + r - 0.5)))
             wmax = 0.0
             for v in range(vlo, vhi + 1):
-                lo, hi = _row_span(mx, my, a, b, c, op, r, v, x0, x1)
+                lo, hi = _row_span(mx, my, a, b, c, pmin, r, v, x0, x1)
                 for u in range(lo, hi + 1):
                     p = (v - y0) * tw + (u - x0)
                     if done[p]:
@@ -203,10 +209,11 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
             idx = k - start
             mx, my, r = means2d[g, 0], means2d[g, 1], float(radii[g])
             a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
+            pmin = _min_power(op)
             vlo = max(y0, int(math.ceil(my - r - 0.5)))
             vhi = min(y1, int(math.floor(my + r - 0.5)))
             for v in range(vlo, vhi + 1):
-                lo, hi = _row_span(mx, my, a, b, c, op, r, v, x0, x1)
+                lo, hi = _row_span(mx, my, a, b, c, pmin, r, v, x0, x1)
                 for u in range(lo, hi + 1):
                     p = (v - y0) * tw + (u - x0)
                     if idx >= last[p]:

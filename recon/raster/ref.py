@@ -39,9 +39,11 @@ def composite(alpha: torch.Tensor, colors: torch.Tensor, depths: torch.Tensor):
     t_before = torch.cat([torch.ones_like(alpha[:, :1]), t_after[:, :-1]], dim=1)
     included = t_after >= T_MIN                                    # a prefix: t_after never increases
     weights = torch.where(included, alpha * t_before, torch.zeros_like(alpha))
+    ones = alpha.new_ones(alpha.shape[0])
+    if alpha.shape[1] == 0:
+        return alpha.new_zeros(alpha.shape[0], colors.shape[1]), alpha.new_zeros(alpha.shape[0]), ones, weights
     n_in = included.sum(dim=1)
-    final_t = torch.where(n_in > 0, t_after.gather(1, (n_in - 1).clamp_min(0)[:, None])[:, 0],
-                          torch.ones_like(alpha[:, 0])) if alpha.shape[1] else torch.ones_like(alpha[:, 0])
+    final_t = torch.where(n_in > 0, t_after.gather(1, (n_in - 1).clamp_min(0)[:, None])[:, 0], ones)
     return weights @ colors, weights @ depths, final_t, weights
 
 
