@@ -243,7 +243,8 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
                     al = min(ALPHA_MAX, op * G)
                     if al < ALPHA_MIN:
                         continue
-                    T[p] = T[p] / (1.0 - al)           # transmittance in front of g
+                    inv_keep = 1.0 / (1.0 - al)
+                    T[p] = T[p] * inv_keep             # transmittance in front of g
                     wgt = al * T[p]
                     dl_dal = 0.0
                     bg_dot = 0.0
@@ -261,7 +262,7 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
                     g_dep[tid, g] += wgt * gd
                     dl_dal *= T[p]
                     last_a[p] = al
-                    ft_over = final_t[v, u] / (1.0 - al)
+                    ft_over = final_t[v, u] * inv_keep
                     dl_dal += (g_alpha[v, u] - bg_dot) * ft_over
                     if op * G > ALPHA_MAX:
                         continue                       # alpha is capped: no gradient to opacity or shape
