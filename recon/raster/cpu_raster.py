@@ -108,6 +108,27 @@ def _row_start(lo, mx, dy, a, b, c):
     return G, math.exp(-a * dx - 0.5 * a - b * dy)
 
 
+@numba.njit(**_opts)
+def _tile_box(tile, tiles_x, width, height):
+    """Pixel box [x0, x1] x [y0, y1] of a tile, its width and pixel count."""
+    x0 = (tile % tiles_x) * TILE
+    y0 = (tile // tiles_x) * TILE
+    x1 = min(x0 + TILE, width) - 1
+    y1 = min(y0 + TILE, height) - 1
+    return x0, x1, y0, y1, x1 - x0 + 1, (x1 - x0 + 1) * (y1 - y0 + 1)
+
+
+@numba.njit(**_opts)
+def _gaussian_in_tile(g, means2d, conics, radii, opacities, y0, y1):
+    """Everything the row scan of Gaussian g over a tile's rows [y0, y1] needs."""
+    mx, my, r = means2d[g, 0], means2d[g, 1], float(radii[g])
+    a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
+    ok, u_lo, u_hi, k1, k2, inv_a = _gaussian_setup(mx, my, a, b, c, op, r)
+    vlo = max(y0, int(math.ceil(my - r - 0.5)))
+    vhi = min(y1, int(math.floor(my + r - 0.5)))
+    return ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, math.exp(-a), vlo, vhi
+
+
 @numba.njit(parallel=True, **_opts)
 def raster_forward(means2d, conics, depths, radii, opacities, colors, background, width, height,
                    counts, lists, image, alpha_img, depth_img, final_t, n_contrib, max_w_thread):
@@ -116,12 +137,7 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
     C = colors.shape[1]
     for tile in numba.prange(n_tiles):
         tid = numba.get_thread_id()
-        x0 = (tile % tiles_x) * TILE
-        y0 = (tile // tiles_x) * TILE
-        x1 = min(x0 + TILE, width) - 1
-        y1 = min(y0 + TILE, height) - 1
-        tw = x1 - x0 + 1
-        npx = tw * (y1 - y0 + 1)
+        x0, x1, y0, y1, tw, npx = _tile_box(tile, tiles_x, width, height)
         T = np.ones(npx)
         acc = np.zeros((npx, C))
         dep = np.zeros(npx)
@@ -133,14 +149,10 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
             if n_done == npx:
                 break
             g = lists[k]
-            mx, my, r = means2d[g, 0], means2d[g, 1], float(radii[g])
-            a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
-            ok, u_lo, u_hi, k1, k2, inv_a = _gaussian_setup(mx, my, a, b, c, op, r)
+            ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
+                g, means2d, conics, radii, opacities, y0, y1)
             if not ok:
                 continue
-            q = math.exp(-a)
-            vlo = max(y0, int(math.ceil(my - r - 0.5)))
-            vhi = min(y1, int(math.floor(my + r - 0.5)))
             wmax = 0.0
             for v in range(vlo, vhi + 1):
                 dy = v + 0.5 - my
@@ -193,12 +205,7 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
     C = colors.shape[1]
     for tile in numba.prange(n_tiles):
         tid = numba.get_thread_id()
-        x0 = (tile % tiles_x) * TILE
-        y0 = (tile // tiles_x) * TILE
-        x1 = min(x0 + TILE, width) - 1
-        y1 = min(y0 + TILE, height) - 1
-        tw = x1 - x0 + 1
-        npx = tw * (y1 - y0 + 1)
+        x0, x1, y0, y1, tw, npx = _tile_box(tile, tiles_x, width, height)
         T = np.empty(npx)
         last = np.empty(npx, np.int64)
         acc = np.zeros((npx, C))       # colour composited behind the current Gaussian, per unit T
@@ -219,14 +226,10 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
         for k in range(start + max_last - 1, start - 1, -1):
             g = lists[k]
             idx = k - start
-            mx, my, r = means2d[g, 0], means2d[g, 1], float(radii[g])
-            a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
-            ok, u_lo, u_hi, k1, k2, inv_a = _gaussian_setup(mx, my, a, b, c, op, r)
+            ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
+                g, means2d, conics, radii, opacities, y0, y1)
             if not ok:
                 continue
-            q = math.exp(-a)
-            vlo = max(y0, int(math.ceil(my - r - 0.5)))
-            vhi = min(y1, int(math.floor(my + r - 0.5)))
             for v in range(vlo, vhi + 1):
                 dy = v + 0.5 - my
                 lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
