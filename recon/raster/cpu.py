@@ -73,7 +73,8 @@ class _Rasterize(torch.autograd.Function):
         n_contrib = np.empty((height, width), np.int64)
         threads = numba.get_num_threads()
         max_w = np.zeros((threads, N), dtype)
-        K.raster_forward(m2d, con, dep, rad, op, col.astype(dtype), bg.astype(dtype), width, height,
+        col, bg = col.astype(dtype, copy=False), bg.astype(dtype, copy=False)
+        K.raster_forward(m2d, con, dep, rad, op, col, bg, width, height,
                          counts, lists, image, alpha, depth, final_t, n_contrib, max_w)
         ctx.save_for_backward(means2d, conics, depths, opacities, colors, background)
         ctx.state = (rad, counts, lists, final_t, n_contrib, width, height)
@@ -95,9 +96,10 @@ class _Rasterize(torch.autograd.Function):
         g_op = np.zeros((threads, N), dtype)
         g_col = np.zeros((threads, N, C), dtype)
         g_bg = np.zeros((threads, C), dtype)
-        K.raster_backward(m2d, con, dep, rad, op, col.astype(dtype), bg.astype(dtype), width, height,
-                          counts, lists, final_t, n_contrib, _np(g_image).astype(dtype),
-                          _np(g_alpha).astype(dtype), _np(g_depth).astype(dtype),
+        col, bg = col.astype(dtype, copy=False), bg.astype(dtype, copy=False)
+        K.raster_backward(m2d, con, dep, rad, op, col, bg, width, height,
+                          counts, lists, final_t, n_contrib, _np(g_image).astype(dtype, copy=False),
+                          _np(g_alpha).astype(dtype, copy=False), _np(g_depth).astype(dtype, copy=False),
                           g_m2d, g_con, g_dep, g_op, g_col, g_bg)
         out = [torch.from_numpy(x.sum(axis=0)) for x in (g_m2d, g_con, g_dep, g_op, g_col, g_bg)]
         return (*out, None, None, None)
