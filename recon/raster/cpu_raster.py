@@ -223,6 +223,7 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
                 for ch in range(C):
                     g_bg[tid, ch] += final_t[v, u] * g_image[v, u, ch]
         start = counts[tile]
+        gcol = np.zeros(C)
         for k in range(start + max_last - 1, start - 1, -1):
             g = lists[k]
             idx = k - start
@@ -230,6 +231,9 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
                 g, means2d, conics, radii, opacities, y0, y1)
             if not ok:
                 continue
+            # this Gaussian's gradient over the tile, summed locally and stored once
+            gdep = gop = gmx = gmy = gca = gcb = gcc = 0.0
+            gcol[:] = 0.0
             for v in range(vlo, vhi + 1):
                 dy = v + 0.5 - my
                 lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
@@ -256,23 +260,32 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
                         last_c[p, ch] = colors[g, ch]
                         gi = g_image[v, u, ch]
                         dl_dal += (colors[g, ch] - acc[p, ch]) * gi
-                        g_col[tid, g, ch] += wgt * gi
+                        gcol[ch] += wgt * gi
                         bg_dot += background[ch] * gi
                     acc_d[p] = last_a[p] * last_d[p] + (1.0 - last_a[p]) * acc_d[p]
                     last_d[p] = depths[g]
                     gd = g_depth[v, u]
                     dl_dal += (depths[g] - acc_d[p]) * gd
-                    g_dep[tid, g] += wgt * gd
+                    gdep += wgt * gd
                     dl_dal *= T[p]
                     last_a[p] = al
                     ft_over = final_t[v, u] * inv_keep
                     dl_dal += (g_alpha[v, u] - bg_dot) * ft_over
                     if op * G > ALPHA_MAX:
                         continue                       # alpha is capped: no gradient to opacity or shape
-                    g_op[tid, g] += G * dl_dal
+                    gop += G * dl_dal
                     dl_dpow = op * G * dl_dal
-                    g_m2d[tid, g, 0] += dl_dpow * (a * dx + b * dy)
-                    g_m2d[tid, g, 1] += dl_dpow * (c * dy + b * dx)
-                    g_con[tid, g, 0] += dl_dpow * (-0.5 * dx * dx)
-                    g_con[tid, g, 1] += dl_dpow * (-dx * dy)
-                    g_con[tid, g, 2] += dl_dpow * (-0.5 * dy * dy)
+                    gmx += dl_dpow * (a * dx + b * dy)
+                    gmy += dl_dpow * (c * dy + b * dx)
+                    gca += dl_dpow * (-0.5 * dx * dx)
+                    gcb += dl_dpow * (-dx * dy)
+                    gcc += dl_dpow * (-0.5 * dy * dy)
+            for ch in range(C):
+                g_col[tid, g, ch] += gcol[ch]
+            g_dep[tid, g] += gdep
+            g_op[tid, g] += gop
+            g_m2d[tid, g, 0] += gmx
+            g_m2d[tid, g, 1] += gmy
+            g_con[tid, g, 0] += gca
+            g_con[tid, g, 1] += gcb
+            g_con[tid, g, 2] += gcc
