@@ -6,7 +6,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from e4dgs.imageio import read_png_linear
 from simulator.h5io import read_window
 from simulator.view import event_frame, save_png
 
@@ -33,5 +32,3 @@ def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, 
     grid = np.concatenate([np.concatenate(r, axis=1) for r in rows if r], axis=0)
     return save_png(out, grid)
 
-
-__all__ = ["contact_sheet", "read_png_linear"]

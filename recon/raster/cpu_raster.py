@@ -33,34 +33,35 @@ def _pixel_range(mx, my, r, width, height):
 
 
 @numba.njit(**_opts)
+def _tile_range(g, means2d, radii, width, height):
+    """Tiles [tx0, tx1] x [ty0, ty1] touched by Gaussian g's footprint (empty when tx0 > tx1)."""
+    if radii[g] <= 0:
+        return 1, 0, 1, 0
+    u0, u1, v0, v1 = _pixel_range(means2d[g, 0], means2d[g, 1], radii[g], width, height)
+    if u0 > u1 or v0 > v1:
+        return 1, 0, 1, 0
+    return u0 // TILE, u1 // TILE, v0 // TILE, v1 // TILE
+
+
+@numba.njit(**_opts)
 def bin_tiles(means2d, radii, order, width, height):
     """CSR tile lists: Gaussians overlapping each tile, in `order` (front to back)."""
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
     counts = np.zeros(tiles_x * tiles_y + 1, np.int64)
     for g in order:
-        r = radii[g]
-        if r <= 0:
-            continue
-        u0, u1, v0, v1 = _pixel_range(means2d[g, 0], means2d[g, 1], r, width, height)
-        if u0 > u1 or v0 > v1:
-            continue
-        for ty in range(v0 // TILE, v1 // TILE + 1):
-            for tx in range(u0 // TILE, u1 // TILE + 1):
+        tx0, tx1, ty0, ty1 = _tile_range(g, means2d, radii, width, height)
+        for ty in range(ty0, ty1 + 1):
+            for tx in range(tx0, tx1 + 1):
                 counts[ty * tiles_x + tx + 1] += 1
     for k in range(1, counts.shape[0]):
         counts[k] += counts[k - 1]
     fill = counts[:-1].copy()
     lists = np.empty(counts[-1], np.int64)
     for g in order:
-        r = radii[g]
-        if r <= 0:
-            continue
-        u0, u1, v0, v1 = _pixel_range(means2d[g, 0], means2d[g, 1], r, width, height)
-        if u0 > u1 or v0 > v1:
-            continue
-        for ty in range(v0 // TILE, v1 // TILE + 1):
-            for tx in range(u0 // TILE, u1 // TILE + 1):
+        tx0, tx1, ty0, ty1 = _tile_range(g, means2d, radii, width, height)
+        for ty in range(ty0, ty1 + 1):
+            for tx in range(tx0, tx1 + 1):
                 t = ty * tiles_x + tx
                 lists[fill[t]] = g
                 fill[t] += 1
