@@ -1,0 +1,58 @@
+"""The D3DGS deformation field: MLP F(gamma(sg(x)), gamma(t)) -> (dx, dr, ds).
+
+Layout as in the public Deformable-3D-Gaussians code: 8 linear layers of 256 with ReLU, the encoded
+inputs concatenated again after layer 4, positional encodings with the input included and
+frequencies 2^0 .. 2^(n-1) (sin, cos per frequency; 10 for positions, 6 for time), and three linear
+heads: position offset (3), quaternion offset (4, added before normalisation) and log-scale
+offset (3). The heads start at zero, so an untrained field is the identity.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+def positional_encoding(x: torch.Tensor, n_freqs: int) -> torch.Tensor:
+    """[..., d] -> [..., d (1 + 2 n_freqs)]: x, then sin(2^k x), cos(2^k x) for k = 0 .. n-1."""
+    parts = [x]
+    for k in range(n_freqs):
+        f = 2.0 ** k
+        parts += [torch.sin(x * f), torch.cos(x * f)]
+    return torch.cat(parts, dim=-1)
+
+
+class DeformationField(nn.Module):
+    def __init__(self, depth: int = 8, width: int = 256, x_freqs: int = 10, t_freqs: int = 6):
+        super().__init__()
+        self.depth, self.x_freqs, self.t_freqs = depth, x_freqs, t_freqs
+        self.skip = depth // 2
+        in_ch = 3 * (1 + 2 * x_freqs) + (1 + 2 * t_freqs)
+        layers = [nn.Linear(in_ch, width)]
+        for i in range(depth - 1):
+            layers.append(nn.Linear(width + in_ch if i == self.skip else width, width))
+        self.layers = nn.ModuleList(layers)
+        self.warp = nn.Linear(width, 3)
+        self.rotation = nn.Linear(width, 4)
+        self.scaling = nn.Linear(width, 3)
+        for head in (self.warp, self.rotation, self.scaling):
+            nn.init.zeros_(head.weight)
+            nn.init.zeros_(head.bias)
+
+    def forward(self, x: torch.Tensor, t: torch.Tensor | float):
+        """x [N, 3] canonical positions (gradient stopped here), t scalar or [N] in [0, 1].
+
+        Returns (dx [N, 3], dq [N, 4], dlog_s [N, 3]).
+        """
+        x = x.detach()
+        t = torch.as_tensor(t, dtype=x.dtype, device=x.device)
+        if t.ndim == 0:
+            t = t.expand(x.shape[0])
+        if not torch.all((t >= 0) & (t <= 1)):
+            raise ValueError(f"deformation field: time must lie in [0, 1], got {t.min().item():.4g}..{t.max().item():.4g}")
+        emb = torch.cat([positional_encoding(x, self.x_freqs), positional_encoding(t[:, None], self.t_freqs)], -1)
+        h = emb
+        for i, layer in enumerate(self.layers):
+            h = torch.relu(layer(h))
+            if i == self.skip:
+                h = torch.cat([emb, h], -1)
+        return self.warp(h), self.rotation(h), self.scaling(h)
