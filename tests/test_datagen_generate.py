@@ -174,3 +174,25 @@ def test_every_scene_builds_and_renders(name, tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     img = np.load(out)
     assert img.shape == (36, 48, 3) and np.all(np.isfinite(img)) and img.std() > 0.01
+
+
+def test_dataset_reader_on_the_tiny_scene(tiny, tmp_path):
+    from datagen.dataset import DatasetError, SceneDataset
+
+    ds = SceneDataset(tiny)
+    assert ds.n_cameras == 2 and ds.duration_us == 4000 and ds.intrinsics.width == 64
+    train, test = ds.frames("train"), ds.frames("test")
+    assert len(test) > 0 and all(f.index % ds.config.frames.test_every == 0 for f in test)
+    img = ds.load_image(test[0].path)
+    assert img.shape == (48, 64, 3) and 0 <= img.min() and img.max() <= 1
+    assert ds.load_image(test[0].gray_path).shape == (48, 64)
+    f = train[0]
+    np.testing.assert_allclose(ds.pose(f.camera, f.t_us), ds.cameras[f.camera].c2w[f.t_us * 3 // 1000], atol=1e-9)
+    blurred = ds.blurred_frames("strong")
+    first, last = blurred[0].exposure_us
+    assert first <= blurred[0].t_us <= last and blurred[0].path.exists()
+    assert ds.event_file(1).exists()
+    with pytest.raises(DatasetError, match="no blur level 'huge'"):
+        ds.blurred_frames("huge")
+    with pytest.raises(DatasetError, match="no manifest.json"):
+        SceneDataset(tmp_path)

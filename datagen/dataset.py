@@ -1,0 +1,92 @@
+"""Read a generated scene folder (no bpy): config, camera trajectories, frame lists, event files.
+
+This is the boundary recon uses (`recon -> datagen.dataset`). Images are returned as float32 in
+[0, 1], sRGB-encoded as stored (metrics are computed on these); linear frames come from `frames/`.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from datagen.cameras import CameraTrajectory, load_cameras
+from datagen.config import SceneConfig, resolve_scene
+
+
+class DatasetError(ValueError):
+    """A scene folder is missing, incomplete or inconsistent."""
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    camera: int
+    index: int
+    t_us: int
+    time: float          # normalised clip time in [0, 1]
+    path: Path           # sRGB PNG (sharp RGB, or a blurred frame)
+    gray_path: Path | None = None
+    exposure_us: tuple[int, int] | None = None   # first and last rendered frame of a blurred frame
+
+
+class SceneDataset:
+    def __init__(self, scene_dir: str | Path):
+        self.dir = Path(scene_dir)
+        if not (self.dir / "manifest.json").exists():
+            raise DatasetError(f"{self.dir}: no manifest.json: not a generated scene, or its generation has not "
+                               "finished (run `e4dgs dataset` again to resume it)")
+        self.manifest = json.loads((self.dir / "manifest.json").read_text())
+        self.config: SceneConfig = resolve_scene(self.manifest["scene"], scene_file=self.dir / "scene.yaml")
+        self.cameras: list[CameraTrajectory] = load_cameras(self.dir / "cameras.json")
+        self.intrinsics = self.cameras[0].intrinsics
+        self.duration_us = int(self.cameras[0].times_us[-1])
+
+    @property
+    def n_cameras(self) -> int:
+        return len(self.cameras)
+
+    def _read_transforms(self, path: Path, blur: dict | None = None) -> list[FrameRecord]:
+        if not path.exists():
+            raise DatasetError(f"{path}: missing")
+        frames = []
+        for f in json.loads(path.read_text())["frames"]:
+            gray = self.dir / (f["gray_path"] + ".png") if "gray_path" in f else None
+            exposure = blur.get((f["camera"], f["index"])) if blur else None
+            frames.append(FrameRecord(f["camera"], f["index"], int(f["timestamp_us"]), float(f["time"]),
+                                      self.dir / (f["file_path"] + ".png"), gray, exposure))
+        return frames
+
+    def frames(self, split: str) -> list[FrameRecord]:
+        """Sharp frames of split 'train' or 'test' (every test_every-th kept timestamp per camera)."""
+        if split not in ("train", "test"):
+            raise ValueError(f"split must be 'train' or 'test', got {split!r}")
+        return self._read_transforms(self.dir / f"transforms_{split}.json")
+
+    def blur_levels(self) -> list[str]:
+        return sorted(self.config.blur_ms)
+
+    def blurred_frames(self, level: str) -> list[FrameRecord]:
+        """Training frames of a blur level; their t_us / time is the exposure centre."""
+        if level not in self.config.blur_ms:
+            raise DatasetError(f"{self.dir}: no blur level {level!r} (have: {', '.join(self.blur_levels()) or 'none'})")
+        exposures = json.loads((self.dir / "blur" / level / "exposures.json").read_text())
+        spans = {(e["camera"], e["index"]): (e["first_frame_us"], e["last_frame_us"]) for e in exposures}
+        return self._read_transforms(self.dir / "blur" / level / "transforms_train.json", spans)
+
+    def event_file(self, camera: int) -> Path:
+        return self.dir / "events" / f"cam{camera}.h5"
+
+    def pose(self, camera: int, t_us) -> np.ndarray:
+        """OpenCV camera-to-world [4, 4] of a camera at any time inside the clip."""
+        return self.cameras[camera].pose_at(t_us)
+
+    @staticmethod
+    def load_image(path: Path) -> np.ndarray:
+        """float32 [H, W, 3] or [H, W] in [0, 1] (sRGB-encoded as stored)."""
+        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise DatasetError(f"{path}: cannot read image")
+        img = img.astype(np.float32) / 255.0
+        return img[..., ::-1].copy() if img.ndim == 3 else img
