@@ -69,3 +69,62 @@ def test_initial_point_clouds():
     assert pts.shape == (10, 3)
     with pytest.raises(ValueError, match=r"\[N, 3\]"):
         from_point_cloud(np.zeros((4, 2)))
+
+
+def _model_and_adam(n=6):
+    from recon.gaussians import GaussianModel
+
+    g = torch.Generator().manual_seed(0)
+    pts = torch.rand(n, 3, generator=g).numpy()
+    model = GaussianModel.from_points(pts, colors=torch.rand(n, 3, generator=g), sh_degree=1)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    loss = sum(p.square().sum() for p in model.parameters()) + model.means.sum()
+    loss.backward()
+    opt.step()
+    return model, opt
+
+
+def test_from_points_activations_and_colours():
+    from recon.gaussians import GaussianModel, nearest_neighbour_scale
+
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0], [5, 5, 5]], np.float32)
+    scale = nearest_neighbour_scale(pts, k=1)
+    np.testing.assert_allclose(scale, [1.0, 1.0, 2.0, np.linalg.norm([5, 3, 5])], rtol=1e-6)
+    model = GaussianModel.from_points(pts, colors=torch.tensor([[0.2, 0.4, 0.6]] * 4), sh_degree=2)
+    assert len(model) == 4 and model.sh_rest.shape == (4, 8, 3)
+    torch.testing.assert_close(model.opacities, torch.full((4,), 0.1))
+    torch.testing.assert_close(model.colors(torch.tensor([3.0, 3.0, 3.0])), torch.tensor([[0.2, 0.4, 0.6]] * 4))
+
+
+def test_prune_clone_split_keep_parameters_and_adam_state_aligned():
+    model, opt = _model_and_adam(6)
+    before = {n: getattr(model, n).detach().clone() for n in ("means", "log_scales", "quats", "opacity_logits")}
+    exp_avg = opt.state[model.means]["exp_avg"].clone()
+    keep = torch.tensor([True, False, True, True, False, True])
+    model.prune(keep, opt)
+    assert len(model) == 4 and torch.equal(model.means, before["means"][keep])
+    assert torch.equal(opt.state[model.means]["exp_avg"], exp_avg[keep])
+    model.clone_selected(torch.tensor([True, False, False, True]), opt)
+    assert len(model) == 6 and torch.equal(model.means[4:], model.means[[0, 3]])
+    assert torch.all(opt.state[model.means]["exp_avg"][4:] == 0)
+    parent_scale = model.scales[1].detach().clone()
+    parent_opacity = model.opacity_logits[1].item()
+    model.split_selected(torch.tensor([False, True, False, False, False, False]), n=2, optimizer=opt,
+                         generator=torch.Generator().manual_seed(1))
+    assert len(model) == 7  # one parent replaced by two children
+    torch.testing.assert_close(model.scales[-2:], (parent_scale / 1.6).expand(2, 3))
+    assert model.opacity_logits[-2:].tolist() == [parent_opacity] * 2
+    for p in model.parameters():  # every parameter is known to Adam with matching state shapes
+        assert opt.state[p]["exp_avg"].shape == p.shape
+    loss = sum(p.square().sum() for p in model.parameters())
+    loss.backward()
+    opt.step()  # no shape mismatch after the edits
+
+
+def test_position_learning_rate_schedule():
+    from recon.gaussians import position_lr
+
+    assert position_lr(0, 1.6e-4, 1.6e-6, 30000) == pytest.approx(1.6e-4)
+    assert position_lr(30000, 1.6e-4, 1.6e-6, 30000) == pytest.approx(1.6e-6)
+    assert position_lr(15000, 1.6e-4, 1.6e-6, 30000) == pytest.approx(1.6e-5)   # log-linear midpoint
+    assert position_lr(0, 1.6e-4, 1.6e-6, 30000, delay_steps=100, delay_mult=0.01) == pytest.approx(1.6e-6)
