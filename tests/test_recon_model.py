@@ -128,3 +128,29 @@ def test_position_learning_rate_schedule():
     assert position_lr(30000, 1.6e-4, 1.6e-6, 30000) == pytest.approx(1.6e-6)
     assert position_lr(15000, 1.6e-4, 1.6e-6, 30000) == pytest.approx(1.6e-5)   # log-linear midpoint
     assert position_lr(0, 1.6e-4, 1.6e-6, 30000, delay_steps=100, delay_mult=0.01) == pytest.approx(1.6e-6)
+
+
+def test_render_at_with_an_untrained_field_equals_the_static_model():
+    from datagen.cameras import look_at_opencv
+    from recon.gaussians import GaussianModel
+    from recon.raster import render
+    from recon.render import camera_center, camera_from_pose, render_at
+
+    g = torch.Generator().manual_seed(3)
+    model = GaussianModel.from_points((torch.rand(200, 3, generator=g) - 0.5).numpy(), sh_degree=1,
+                                      colors=torch.rand(200, 3, generator=g))
+    c2w = look_at_opencv((2.0, -2.5, 1.0), (0.0, 0.0, 0.0))
+    K = np.array([[40.0, 0, 24], [0, 40.0, 18], [0, 0, 1]])
+    cam = camera_from_pose(K, c2w, 48, 36)
+    torch.testing.assert_close(camera_center(cam), torch.tensor([2.0, -2.5, 1.0]), atol=1e-5, rtol=0)
+    bg = torch.zeros(3)
+    field = DeformationField(depth=4, width=32)
+    with torch.no_grad():
+        static = render(model.means, model.quats, model.scales, model.opacities,
+                        model.colors(camera_center(cam)), cam, bg)
+        for t in (0.0, 0.6, 1.0):
+            out = render_at(model, field, cam, t, bg)
+            torch.testing.assert_close(out.image, static.image)
+        assert static.alpha.max() > 0.5
+        with pytest.raises(ValueError, match=r"time must lie in \[0, 1\]"):
+            render_at(model, field, cam, 1.5, bg)
