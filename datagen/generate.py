@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import importlib
 import json
 import platform
 import subprocess
@@ -25,16 +24,16 @@ import numpy as np
 from tqdm import tqdm
 
 import e4dgs
-from blender_scenes.common import consolidate
 from datagen import render as R
 from datagen.blur import BlurStack, exposure_frames, exposure_window
 from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, rig_poses
 from datagen.config import SceneConfig, load_preset, resolve_scene
 from datagen.preview import contact_sheet
 from e4dgs.checkpoint import JobCheckpoint
-from e4dgs.config import dump_config, to_dict
+from e4dgs.config import dump_config
 from e4dgs.fileio import write_text_atomic
 from e4dgs.imageio import write_exr, write_png_srgb
+from simulator.h5io import read_info, simulator_attrs
 from simulator.pixel import rec709_luma
 from simulator.resumable import EventSpool
 from simulator.simulator import EventSimulator
@@ -67,12 +66,11 @@ def _git_commit() -> str | None:
 
 
 def _versions() -> dict:
-    import bpy
     import h5py
     import numba
 
     return {"toolkit": e4dgs.__version__, "python": platform.python_version(), "numpy": np.__version__,
-            "bpy": bpy.app.version_string, "numba": numba.__version__, "h5py": h5py.__version__}
+            "bpy": R.blender_version(), "numba": numba.__version__, "h5py": h5py.__version__}
 
 
 class SceneJob:
@@ -117,18 +115,13 @@ class SceneJob:
             return self.dir
         self.dir.mkdir(parents=True, exist_ok=True)
         t_start = time.perf_counter()
-        R.reset_scene()
-        R.setup_render(cfg)
-        importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)
-        consolidate()  # fewer, larger objects render faster in Workbench
-        cams = R.make_cameras(cfg.camera.n_cameras, self.intr)
+        cams = R.build_scene(cfg, self.intr)
         renderer = R.ViewRenderer()
         C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
         ckpt = JobCheckpoint(self.dir / ".generate.ckpt.npz", self.fingerprint)
         state = ckpt.load() or {}
         sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.seed * 1000 + k) for k in range(C)]
-        attrs = {f"sim_{key}": v for key, v in to_dict(cfg.sensor).items()}
-        attrs.update(simulator_config=dump_config(cfg.sensor), scene=cfg.name)
+        attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
         spools = []
         for k in range(C):
             spools.append(EventSpool(self.dir / "events" / f"cam{k}.h5", W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
@@ -214,8 +207,6 @@ class SceneJob:
         contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, level, d / "preview" / "contact_sheet.png")
         seconds["write"] += time.perf_counter() - t_write
         files = sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith(".") and p.name != "manifest.json")
-        from simulator.h5io import read_info
-
         manifest = {
             "scene": cfg.name, "preset": self.preset, "format_version": FORMAT_VERSION,
             "config_sha256": self.fingerprint, "seed": cfg.seed, "git_commit": _git_commit(),

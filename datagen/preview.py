@@ -7,7 +7,8 @@ import cv2
 import numpy as np
 
 from simulator.h5io import read_window
-from simulator.view import event_frame, save_png
+from e4dgs.imageio import write_png
+from simulator.view import event_frame
 
 
 def _label(img: np.ndarray, text: str) -> np.ndarray:
@@ -30,5 +31,5 @@ def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, 
         ev = read_window(scene_dir / "events" / f"cam{k}.h5", t_us - window_us // 2, t_us + window_us // 2)
         rows[2].append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:g} ms"))
     grid = np.concatenate([np.concatenate(r, axis=1) for r in rows if r], axis=0)
-    return save_png(out, grid)
+    return write_png(out, grid)
 

@@ -153,6 +153,23 @@ class ViewRenderer:
             self._dir.rmdir()
 
 
+def blender_version() -> str:
+    return bpy.app.version_string
+
+
+def build_scene(cfg: SceneConfig, intr: Intrinsics) -> list:
+    """Reset Blender, set up the engine, build cfg's scene and its cameras (returned)."""
+    import importlib
+
+    from blender_scenes.common import consolidate
+
+    reset_scene()
+    setup_render(cfg)
+    importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)
+    consolidate()  # fewer, larger objects render faster in Workbench
+    return make_cameras(cfg.camera.n_cameras, intr)
+
+
 def render_clip(cfg: SceneConfig, tau: np.ndarray, camera_ids=(0,), camera_tau: np.ndarray | None = None,
                 progress: bool = False) -> tuple[np.ndarray, float]:
     """Build `cfg`'s scene and render cameras `camera_ids` at normalised times tau [T].
@@ -161,18 +178,11 @@ def render_clip(cfg: SceneConfig, tau: np.ndarray, camera_ids=(0,), camera_tau: 
     the reverse) can be rendered. Returns (linear RGB frames [C, T, H, W, 3] float32 including the
     scene's exposure gain, render seconds).
     """
-    import importlib
     import time
 
-    from blender_scenes.common import consolidate
     from datagen.cameras import intrinsics_from_fov, rig_poses
 
-    reset_scene()
-    setup_render(cfg)
-    importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)
-    consolidate()
-    intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
-    cams = make_cameras(cfg.camera.n_cameras, intr)
+    cams = build_scene(cfg, intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg))
     poses = rig_poses(cfg.camera, tau if camera_tau is None else camera_tau)
     renderer = ViewRenderer()
     out = np.empty((len(camera_ids), len(tau), cfg.render.height, cfg.render.width, 3), np.float32)

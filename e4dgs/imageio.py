@@ -79,22 +79,24 @@ def read_png_linear(path: str | os.PathLike) -> np.ndarray:
     return srgb_to_linear(v).astype(np.float32)
 
 
-def write_png_srgb(path: str | os.PathLike, linear: np.ndarray) -> Path:
-    """Linear [H,W] or [H,W,3] image -> 8-bit sRGB PNG (atomic)."""
+def write_png(path: str | os.PathLike, image: np.ndarray) -> Path:
+    """uint8 [H,W] or RGB [H,W,3] -> PNG, atomically."""
     import cv2
 
-    from simulator.pixel import linear_to_srgb
-
-    v = np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8)
-    if v.ndim == 3:
-        v = v[..., ::-1]
     path = Path(path)
     with atomic_output(path) as tmp:
-        ok, buf = cv2.imencode(".png", v)
+        ok, buf = cv2.imencode(".png", image[..., ::-1] if image.ndim == 3 else image)
         if not ok:
             raise ValueError(f"{path}: PNG encoding failed")
         tmp.write_bytes(buf.tobytes())
     return path
+
+
+def write_png_srgb(path: str | os.PathLike, linear: np.ndarray) -> Path:
+    """Linear [H,W] or [H,W,3] image -> 8-bit sRGB PNG (atomic)."""
+    from simulator.pixel import linear_to_srgb
+
+    return write_png(path, np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8))
 
 
 def read_linear_image(path: str | os.PathLike) -> np.ndarray:

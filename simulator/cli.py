@@ -6,8 +6,6 @@ import hashlib
 import json
 from pathlib import Path
 
-import numpy as np
-
 IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 
 
@@ -70,10 +68,11 @@ def job_fingerprint(config_yaml: str, seed: int, files: list[Path], t_us: list[i
 def run_simulate(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from e4dgs.config import ConfigError, dump_config, load_config, to_dict
+    from e4dgs.config import ConfigError, dump_config, load_config
     from e4dgs.imageio import ImageReadError, read_linear_image
     from simulator.config import SimulatorConfig
     from e4dgs.checkpoint import JobCheckpoint
+    from simulator.h5io import simulator_attrs
     from simulator.resumable import EventSpool
     from simulator.simulator import EventSimulator, FrameError
 
@@ -96,8 +95,8 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {exc}") from None
     height, width = first.shape[:2]
     config_yaml = dump_config(config)
-    attrs = {f"sim_{k}": v for k, v in to_dict(config).items()}
-    attrs.update(simulator_config=config_yaml, seed=args.seed, source_frames=str(args.frames),
+    attrs = simulator_attrs(config)
+    attrs.update(seed=args.seed, source_frames=str(args.frames),
                  n_frames=len(files))
     ckpt = JobCheckpoint(args.out.with_name(f".{args.out.name}.ckpt.npz"),
                          job_fingerprint(config_yaml, args.seed, files, t_us))
@@ -141,7 +140,8 @@ def add_view_parser(sub) -> None:
 
 def run_view(args: argparse.Namespace) -> int:
     from simulator.h5io import EventFileError, read_info, read_window
-    from simulator.view import event_frame, parse_time_us, save_png, save_video
+    from e4dgs.imageio import write_png
+    from simulator.view import event_frame, parse_time_us, save_video
 
     try:
         info = read_info(args.events)
@@ -154,7 +154,7 @@ def run_view(args: argparse.Namespace) -> int:
         suffix = args.out.suffix.lower()
         if suffix == ".png":
             stream = read_window(args.events, t0, t1)
-            save_png(args.out, event_frame(stream))
+            write_png(args.out, event_frame(stream))
             print(f"{args.out}: {len(stream)} events in [{t0}, {t1}) us")
         elif suffix == ".mp4":
             window = parse_time_us(args.window)

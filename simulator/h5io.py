@@ -24,7 +24,8 @@ import h5py
 import numpy as np
 
 from e4dgs.fileio import temp_path_for
-from simulator.events import EVENT_DTYPE, EventStream, empty_events, validate_events
+from e4dgs.config import dump_config, to_dict
+from simulator.events import EVENT_DTYPE, EventStream, validate_events
 
 FORMAT_VERSION = 1
 _CHUNK = 1 << 16
@@ -235,5 +236,8 @@ def read_window(path: str | os.PathLike, t0_us: int, t1_us: int) -> EventStream:
         return EventStream(_slice(f, i0, i1), int(f.attrs["width"]), int(f.attrs["height"]))
 
 
-__all__ = ["EventFileError", "EventFileWriter", "read_events", "read_info", "read_window",
-           "window_indices", "write_events", "empty_events"]
+def simulator_attrs(config) -> dict[str, Any]:
+    """Event-file attributes of a simulator config: every parameter as `sim_<name>`, plus the YAML."""
+    attrs = {f"sim_{k}": v for k, v in to_dict(config).items()}
+    attrs["simulator_config"] = dump_config(config)
+    return attrs

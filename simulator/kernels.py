@@ -349,7 +349,7 @@ def emit_events(L0, L1, base, t_ready, c_pos, c_neg, t0_us, t1_us, refractory_us
     if D > _MAX_OFFSET:
         raise ValueError(f"frame interval of {D} us is longer than the supported {_MAX_OFFSET} us")
     if width > 0xFFFF or L0.shape[0] // max(width, 1) > 0x7FFF:
-        raise ValueError(f"sensor too large for packed event keys: width <= 65535 and height <= 32767")
+        raise ValueError("sensor too large for packed event keys: width <= 65535 and height <= 32767")
     parallel = ws.n_chunks > 1
     P = L0.shape[0]
     bounds = np.linspace(0, P, ws.n_chunks + 1).astype(np.int64)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simulator.pixel import shot_noise_rates_hz
+from simulator.pixel import intensity01, shot_noise_rates_hz
 
 NO_NOISE = (np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int8))
 
@@ -47,8 +47,6 @@ def draw_noise_events(rng: np.random.Generator, t0_us: int, t1_us: int, n_pixels
     dt_s = (t1_us - t0_us) * 1e-6
     pix_parts, pol_parts = [], []
     if shot_rate_hz > 0:
-        from simulator.pixel import intensity01
-
         for pol, c_nom, c_pix in ((1, c_nominal[0], c_pos), (-1, c_nominal[1], c_neg)):
             c_at = (lambda i, c=c_pix: c[0]) if c_pix.shape[0] == 1 else (lambda i, c=c_pix: c[i])
             # rate is largest in the dark (factor 1) and at the smallest threshold

@@ -44,18 +44,6 @@ def event_frame(stream: EventStream, saturate_count: int = 3) -> np.ndarray:
     return np.round(img).astype(np.uint8)
 
 
-def save_png(path: str | os.PathLike, rgb: np.ndarray) -> Path:
-    import cv2
-
-    path = Path(path)
-    with atomic_output(path) as tmp:
-        ok, buf = cv2.imencode(".png", rgb[..., ::-1])
-        if not ok:
-            raise ValueError(f"{path}: PNG encoding failed")
-        tmp.write_bytes(buf.tobytes())
-    return path
-
-
 def save_video(path: str | os.PathLike, frames: list[np.ndarray] | np.ndarray, fps: float = 30.0) -> Path:
     """Write RGB uint8 frames to an MP4 (mp4v) file atomically."""
     import cv2

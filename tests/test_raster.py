@@ -1,7 +1,6 @@
 """The Gaussian rasterizer: backends against a dense brute force, gradients, hard cases."""
 import math
 
-import numpy as np
 import pytest
 import torch
 
