@@ -7,6 +7,7 @@ import sys
 
 def build_parser() -> argparse.ArgumentParser:
     from datagen.cli import add_dataset_parser
+    from recon.cli import add_render_parser, add_train_parser
     from simulator.cli import add_simulate_parser, add_view_parser
 
     parser = argparse.ArgumentParser(prog="e4dgs", description="Event-camera 4D reconstruction toolkit")
@@ -14,6 +15,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_simulate_parser(sub)
     add_view_parser(sub)
     add_dataset_parser(sub)
+    add_train_parser(sub)
+    add_render_parser(sub)
     return parser
 
 

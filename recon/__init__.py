@@ -1,1 +1,3 @@
-"""Reconstruction: Gaussian model, rasterizer backends, deformation, methods (later issues)."""
+"""Dynamic scene reconstruction: `fit` a registered method, `load` a model, `model.render(camera, t)`."""
+from recon.api import fit, load, resolve_config  # noqa: F401
+from recon.methods import get_method, method_names  # noqa: F401

@@ -1,6 +1,8 @@
 """Rendering a deformable Gaussian model at a time: deform, colour, rasterize."""
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import torch
 
@@ -21,12 +23,28 @@ def camera_center(camera: Camera) -> torch.Tensor:
     return -R.T @ t
 
 
-def render_at(model: GaussianModel, field: DeformationField | None, camera: Camera, t: float,
-              background: torch.Tensor, backend: str = "auto") -> RenderOutput:
-    """Render the model deformed to normalised time t in [0, 1] (field None: the canonical model)."""
-    means, quats, log_scales = model.means, model.quats, model.log_scales
-    if field is not None:
+def check_time(t: float) -> float:
+    t = float(t)
+    if not 0.0 <= t <= 1.0:
+        raise ValueError(f"time must lie in [0, 1] (the clip's normalised time), got {t:.6g}")
+    return t
+
+
+def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float, bf16: bool = False):
+    """Means [N,3], quaternions [N,4] and log-scales [N,3] at normalised time t (field None: canonical)."""
+    means, quats, log_scales = gaussians.means, gaussians.quats, gaussians.log_scales
+    if field is None or len(gaussians) == 0:
+        return means, quats, log_scales
+    ctx = torch.autocast("cpu", dtype=torch.bfloat16) if bf16 and means.device.type == "cpu" else contextlib.nullcontext()
+    with ctx:
         dx, dq, ds = field(means, t)
-        means, quats, log_scales = means + dx, quats + dq, log_scales + ds
-    colors = model.colors(camera_center(camera).to(means.dtype), means)
-    return render(means, quats, torch.exp(log_scales), model.opacities, colors, camera, background, backend)
+    return means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype)
+
+
+def render_at(gaussians: GaussianModel, field: DeformationField | None, camera: Camera, t: float,
+              background: torch.Tensor, backend: str = "auto", bf16: bool = False) -> RenderOutput:
+    """Render the model deformed to normalised time t in [0, 1] (field None: the canonical model)."""
+    check_time(t)
+    means, quats, log_scales = deformed(gaussians, field, t, bf16)
+    colors = gaussians.colors(camera_center(camera).to(means.dtype), means)
+    return render(means, quats, torch.exp(log_scales), gaussians.opacities, colors, camera, background, backend)

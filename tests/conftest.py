@@ -14,3 +14,19 @@ def frame_from_log(L) -> np.ndarray:
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
+
+
+@pytest.fixture(scope="session")
+def motion_scene(tmp_path_factory):
+    """The `tiny_motion` preset's cubes scene (Blender + simulator, ~4 s): 2 cameras, 64x48, 61
+    timestamps, 46 train / 16 test frames, blur levels mild and strong. Shared by the recon tests."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path_factory.mktemp("tiny_motion")
+    root = Path(__file__).resolve().parent.parent
+    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", "tiny_motion",
+                        "--out", str(out), "--no-progress"], capture_output=True, text=True, cwd=root)
+    assert r.returncode == 0, r.stderr
+    return out / "cubes"

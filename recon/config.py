@@ -1,0 +1,156 @@
+"""Typed configs of the reconstruction methods (strict YAML through `e4dgs.config`).
+
+Schedules are written for the public D3DGS budget (40,000 iterations) and, with
+`scale_schedule: true`, scaled to the run's `iterations` (see `Schedule`), so a short CPU run keeps
+the public code's proportions: warm-up 7.5 %, densification from 1.25 % to 37.5 %, etc. Two
+intervals have floors, because what they wait for does not shrink with the budget: densification
+accumulates gradients over at least MIN_DENSIFY_INTERVAL views, and after an opacity reset the
+opacities need several hundred Adam steps (lr 0.05 on logits) to recover, so resets come at least
+MIN_OPACITY_RESET_INTERVAL iterations apart (short budgets get none). The warm-up (static
+Gaussians first) lasts at least MIN_WARM_UP iterations: a deformation field switched on before the
+static fit has settled follows coherent gradients and its offsets grow exponentially (measured on
+the tiny test scene: a 45-iteration warm-up gave log-scale offsets of -180 within 250 iterations).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from e4dgs.config import ConfigError
+
+REFERENCE_ITERATIONS = 40_000
+MIN_DENSIFY_INTERVAL = 10
+MIN_OPACITY_RESET_INTERVAL = 1000
+MIN_WARM_UP = 200
+
+
+def _positive(obj, *names):
+    for name in names:
+        if not getattr(obj, name) > 0:
+            raise ConfigError(f"{name}: expected a positive value, got {getattr(obj, name)!r}")
+
+
+@dataclass(frozen=True)
+class InitConfig:
+    """Initial points. `auto`: a cube for object scenes, a dense-to-sparse sphere for rooms (the scene
+    kind comes from the dataset's scene.yaml). Sizes `null` mean: cube half size 0.35 x the camera
+    rig's radius, sphere radius 10 (the paper's), both centred on the rig's target."""
+    kind: Literal["auto", "cube", "sphere", "points"] = "auto"
+    n_points_object: int = 100_000
+    n_points_room: int = 200_000
+    cube_half_size: float | None = None
+    sphere_radius: float | None = None
+    points_file: str | None = None   # .npy or .ply-free [N, 3] float array, for kind: points
+    init_opacity: float = 0.1
+    seed: int = 0
+
+    def __post_init__(self):
+        _positive(self, "n_points_object", "n_points_room")
+        if not 0 < self.init_opacity < 1:
+            raise ConfigError(f"init_opacity: expected a value in (0, 1), got {self.init_opacity!r}")
+        if self.kind == "points" and not self.points_file:
+            raise ConfigError("points_file: required when kind is 'points'")
+
+
+@dataclass(frozen=True)
+class LearningRates:
+    """Adam learning rates of the public D3DGS code. position_* are multiplied by the scene extent
+    (3DGS's spatial_lr_scale); the deformation field's rate starts at position_init x deform_scale."""
+    position_init: float = 1.6e-4
+    position_final: float = 1.6e-6
+    position_delay_mult: float = 0.01
+    feature: float = 0.0025          # SH degree 0; higher degrees use feature / 20
+    opacity: float = 0.05
+    scaling: float = 0.001
+    rotation: float = 0.001
+    deform_scale: float = 5.0
+
+
+@dataclass(frozen=True)
+class DensifyConfig:
+    """3DGS adaptive density control. Iteration numbers are for the 40k reference budget."""
+    enabled: bool = True
+    start: int = 500
+    stop: int = 15_000
+    interval: int = 100
+    grad_threshold: float = 2e-4     # on the NDC-space gradient norm of the projected means
+    percent_dense: float = 0.01      # clone below / split above this fraction of the scene extent
+    min_opacity: float = 0.005
+    max_screen_size: float = 20.0    # pixels; applied after the first opacity reset
+    max_world_size: float = 0.1      # fraction of the scene extent
+    opacity_reset: bool = True
+    opacity_reset_interval: int = 3000
+    max_gaussians: int = 1_000_000   # no densification beyond this count
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Iteration numbers after scaling to the run's budget."""
+    warm_up: int
+    densify_start: int
+    densify_stop: int
+    densify_interval: int
+    opacity_reset_interval: int
+    position_lr_steps: int
+    deform_lr_steps: int
+    sh_interval: int
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """What every method's trainer shares: budget, schedule, checkpoints, evaluation."""
+    iterations: int = 40_000
+    scale_schedule: bool = True
+    deform: bool = True               # false: a static 3DGS (no deformation field is ever applied)
+    warm_up: int = 3000               # deformation off before this (reference iterations)
+    position_lr_steps: int = 30_000
+    deform_lr_steps: int = 40_000
+    sh_degree: int = 3
+    sh_interval: int = 1000           # one more SH degree every this many (reference) iterations
+    lr: LearningRates = field(default_factory=LearningRates)
+    densify: DensifyConfig = field(default_factory=DensifyConfig)
+    init: InitConfig = field(default_factory=InitConfig)
+    background: tuple[float, float, float] | None = None   # None: the scene's empty-background colour
+    deform_bf16: bool = False         # run the deformation MLP under bfloat16 autocast (CPU: ~2.3x faster)
+    backend: str = "auto"
+    seed: int = 0
+    checkpoint_every: int = 500       # real iterations between resumable checkpoints
+    eval_every: int = 0               # real iterations between test-PSNR log rows (0: at snapshots only)
+    eval_max_views: int = 0           # test views used for the log's PSNR (0: all)
+    snapshots: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0)   # fractions of the budget saved as models
+
+    def __post_init__(self):
+        _positive(self, "iterations", "checkpoint_every")
+        if not 0 <= self.sh_degree <= 3:
+            raise ConfigError(f"sh_degree: expected 0..3, got {self.sh_degree!r}")
+        if self.eval_every < 0 or self.eval_max_views < 0:
+            raise ConfigError("eval_every, eval_max_views: expected values >= 0")
+        for f in self.snapshots:
+            if not 0 < f <= 1:
+                raise ConfigError(f"snapshots: expected fractions in (0, 1], got {f!r}")
+        if self.background is not None and not all(0 <= c <= 1 for c in self.background):
+            raise ConfigError(f"background: expected values in [0, 1], got {self.background!r}")
+
+    def schedule(self) -> Schedule:
+        s = self.iterations / REFERENCE_ITERATIONS if self.scale_schedule else 1.0
+
+        def sc(v: int) -> int:
+            return max(1, int(round(v * s)))
+
+        d = self.densify
+        return Schedule(warm_up=max(sc(self.warm_up), min(self.warm_up, MIN_WARM_UP)), densify_start=sc(d.start),
+                        densify_stop=sc(d.stop), densify_interval=max(sc(d.interval), min(d.interval, MIN_DENSIFY_INTERVAL)),
+                        opacity_reset_interval=max(sc(d.opacity_reset_interval),
+                                                   min(d.opacity_reset_interval, MIN_OPACITY_RESET_INTERVAL)),
+                        position_lr_steps=sc(self.position_lr_steps), deform_lr_steps=sc(self.deform_lr_steps),
+                        sh_interval=sc(self.sh_interval))
+
+
+@dataclass(frozen=True)
+class D3DGSConfig:
+    """D3DGS on the dataset's RGB frames: `frames: sharp` (the paper's "w/o blur") or a blur level
+    ("w/ blur": the blurred frames, each at the pose of its exposure centre)."""
+    frames: str = "sharp"
+    channels: Literal[1, 3] = 3       # 1: train on the grayscale frames
+    lambda_dssim: float = 0.2
+    train: TrainConfig = field(default_factory=TrainConfig)

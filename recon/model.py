@@ -1,0 +1,122 @@
+"""A trained (or training) dynamic scene: canonical Gaussians + deformation field + what rendering needs.
+
+    model = recon.load("runs/lego/d3dgs")          # a model.pt file or the folder holding it
+    image = model.render(camera, t)                # [H, W, C] float in [0, 1]; camera: Camera or index
+
+`camera` is a `recon.raster.Camera` (any intrinsics and pose) or the index of one of the dataset's
+cameras, posed at time t along its recorded trajectory. t is the clip's normalised time in [0, 1].
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from datagen.cameras import CameraTrajectory, Intrinsics
+from e4dgs.fileio import atomic_output
+from recon.deform import DeformationField
+from recon.gaussians import GaussianModel
+from recon.raster import Camera, RenderOutput
+from recon.render import camera_from_pose, check_time, render_at
+
+FORMAT = "e4dgs-dynamic-gaussians/1"
+
+
+@dataclass
+class ModelMeta:
+    method: str
+    channels: int
+    sh_degree: int
+    background: list[float]
+    extent: float                     # scene extent (3DGS's cameras_extent)
+    duration_us: int                  # clip length; t = t_us / duration_us
+    deform_enabled: bool = False      # False until the warm-up has passed
+    deform_bf16: bool = False
+    active_sh_degree: int = 0
+    iteration: int = 0
+    scene: str = ""
+    config: dict = field(default_factory=dict)   # the method's resolved config
+    # per-channel (gain, offset) on log intensity, set by event methods' colour correction (or None)
+    color_correction: list | None = None
+
+
+class DynamicGaussians:
+    def __init__(self, gaussians: GaussianModel, deform: DeformationField, meta: ModelMeta,
+                 cameras: list[CameraTrajectory] | None = None):
+        self.gaussians = gaussians
+        self.deform = deform
+        self.meta = meta
+        self.cameras = cameras or []
+
+    def __len__(self) -> int:
+        return len(self.gaussians)
+
+    @property
+    def background(self) -> torch.Tensor:
+        return torch.tensor(self.meta.background, dtype=torch.float32)
+
+    def camera(self, index: int, t: float) -> Camera:
+        """Dataset camera `index` at normalised time t, posed along its recorded trajectory."""
+        if not 0 <= index < len(self.cameras):
+            raise ValueError(f"camera index {index} out of range: the model knows {len(self.cameras)} camera(s)")
+        traj = self.cameras[index]
+        t_us = check_time(t) * self.meta.duration_us
+        return camera_from_pose(traj.intrinsics.K, traj.pose_at(t_us), traj.intrinsics.width, traj.intrinsics.height)
+
+    def render_output(self, camera: Camera, t: float, backend: str = "auto") -> RenderOutput:
+        """Differentiable render at normalised time t (the deformation applies once enabled)."""
+        field = self.deform if self.meta.deform_enabled else None
+        return render_at(self.gaussians, field, camera, t, self.background, backend, self.meta.deform_bf16)
+
+    @torch.no_grad()
+    def render(self, camera: Camera | int, t: float, backend: str = "auto") -> torch.Tensor:
+        """Image [H, W, C] in [0, 1] of `camera` (a Camera, or a dataset camera index) at time t."""
+        check_time(t)
+        cam = self.camera(camera, t) if isinstance(camera, (int, np.integer)) else camera
+        return self.render_output(cam, t, backend).image.clamp(0.0, 1.0)
+
+    # -- files ----------------------------------------------------------------------------------
+    def state(self) -> dict[str, Any]:
+        return {"format": FORMAT, "meta": asdict(self.meta),
+                "gaussians": {k: v.detach().clone() for k, v in self.gaussians.state_dict().items()},
+                "deform": {k: v.detach().clone() for k, v in self.deform.state_dict().items()},
+                "cameras": [{"intrinsics": c.intrinsics.to_dict(), "times_us": c.times_us.tolist(),
+                             "c2w_opencv": c.c2w.tolist()} for c in self.cameras]}
+
+    def save(self, path: str | Path) -> None:
+        """Write the model to `path` atomically (a half-written file never appears)."""
+        with atomic_output(path) as tmp:
+            torch.save(self.state(), tmp)
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any], source: str = "<state>") -> "DynamicGaussians":
+        if not isinstance(state, dict) or state.get("format") != FORMAT:
+            raise ValueError(f"{source}: not a model file of this toolkit (expected format {FORMAT!r})")
+        meta = ModelMeta(**copy.deepcopy(state["meta"]))
+        n = state["gaussians"]["means"].shape[0]
+        gaussians = GaussianModel(n, meta.sh_degree, meta.channels)
+        gaussians.load_state_dict(state["gaussians"])
+        gaussians.active_sh_degree = meta.active_sh_degree
+        deform = DeformationField()
+        deform.load_state_dict(state["deform"])
+        cams = [CameraTrajectory(Intrinsics(**c["intrinsics"]), np.asarray(c["times_us"], np.int64),
+                                 np.asarray(c["c2w_opencv"], np.float64)) for c in state.get("cameras", [])]
+        return cls(gaussians, deform, meta, cams)
+
+
+def load(path: str | Path) -> DynamicGaussians:
+    """Load a model: a model .pt file, or a training folder (its model.pt)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "model.pt"
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such model file (train one with `e4dgs train`)")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not a model file"
+        raise ValueError(f"{path}: cannot read model file ({exc})") from None
+    return DynamicGaussians.from_state(state, str(path))

@@ -1,0 +1,325 @@
+"""The training loop every method shares: model set-up, Adam groups and schedules, warm-up,
+densification, checkpoints with resume, the log, evaluation points and snapshots.
+
+A method supplies the loss (`Method.step`) and its data; the trainer does the rest:
+
+    out_dir/run.json            method, fingerprint, resolved config, scene
+    out_dir/checkpoint.pt       latest resumable state (atomic; removed when training finishes)
+    out_dir/log.jsonl           rows {iteration, wall_s, loss, n_gaussians[, test_psnr]} (wall_s: training
+                                time only, evaluation and file writing excluded, summed over resumes)
+    out_dir/snapshots/iter_XXXXXX.pt   models at the configured fractions of the budget
+    out_dir/model.pt            the finished model
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from datagen.dataset import SceneDataset
+from e4dgs.config import dump_config, to_dict
+from e4dgs.fileio import atomic_output, write_text_atomic
+from recon import init as initial
+from recon.config import TrainConfig
+from recon.deform import DeformationField
+from recon.densify import DensifyStats, densify_and_prune, reset_opacity
+from recon.evaluate import evaluate_psnr
+from recon.gaussians import GaussianModel, position_lr
+from recon.model import DynamicGaussians, ModelMeta
+from simulator.pixel import linear_to_srgb, rec709_luma, srgb_to_linear
+
+CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
+
+
+class TrainingError(RuntimeError):
+    """Training cannot go on (non-finite loss, every Gaussian pruned, a foreign output folder)."""
+
+
+class Method:
+    """Hooks a method implements (subclass it and `@register` it)."""
+    name = ""
+    config_cls: type = object
+
+    def __init__(self, dataset: SceneDataset, cfg: Any):
+        self.dataset, self.cfg = dataset, cfg
+
+    def channels(self) -> int:
+        raise NotImplementedError
+
+    def extra_parameters(self) -> list[dict]:
+        """Additional Adam groups (dicts with params, lr, name)."""
+        return []
+
+    def step(self, trainer: "Trainer", iteration: int):
+        """Loss of one iteration -> (loss tensor, [(RenderOutput, Camera)] whose means2d kept their grad)."""
+        raise NotImplementedError
+
+    def prune_mask(self, trainer: "Trainer", iteration: int) -> torch.Tensor | None:
+        """Extra Gaussians to prune at a densification step (bool [N]) or None."""
+        return None
+
+    def eval_pairs(self, model: DynamicGaussians, records) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(prediction, ground truth) images [H, W, C] in [0, 1] for held-out records."""
+        raise NotImplementedError
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, state: dict) -> None:
+        pass
+
+
+def scene_extent(dataset: SceneDataset) -> float:
+    """3DGS's cameras_extent: 1.1 x the largest distance of a camera centre from their mean."""
+    centres = np.concatenate([traj.c2w[:, :3, 3] for traj in dataset.cameras])
+    return float(1.1 * np.linalg.norm(centres - centres.mean(0), axis=1).max())
+
+
+def scene_background(dataset: SceneDataset, channels: int) -> list[float]:
+    """The stored (sRGB) colour of the scene's empty background."""
+    light = dataset.config.lighting
+    linear = np.clip(np.asarray(light.background) * light.exposure, 0, 1)
+    if channels == 1:
+        return [float(linear_to_srgb(rec709_luma(linear)))]
+    return [float(c) for c in linear_to_srgb(linear)]
+
+
+def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
+    ic = cfg.init
+    rig = dataset.config.camera
+    kind = ic.kind if ic.kind != "auto" else ("cube" if dataset.config.kind == "object" else "sphere")
+    if kind == "cube":
+        half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * rig.radius
+        return initial.random_cube(ic.n_points_object, half, rig.target, ic.seed)
+    if kind == "sphere":
+        radius = ic.sphere_radius if ic.sphere_radius is not None else 10.0
+        return initial.dense_to_sparse_sphere(ic.n_points_room, radius, rig.target, ic.seed)
+    path = Path(ic.points_file)
+    if not path.exists():
+        raise FileNotFoundError(f"init.points_file: {path} does not exist")
+    return initial.from_point_cloud(np.load(path), seed=ic.seed)
+
+
+def fingerprint(method: str, cfg: Any, dataset: SceneDataset) -> str:
+    h = hashlib.sha256()
+    h.update(method.encode())
+    h.update(dump_config(cfg).encode())
+    h.update((dataset.dir / "manifest.json").read_bytes())
+    return h.hexdigest()[:16]
+
+
+class Trainer:
+    def __init__(self, method: Method, out_dir: str | Path, progress: bool = True,
+                 on_iteration: Callable[["Trainer", int], None] | None = None):
+        self.method = method
+        self.dataset = method.dataset
+        self.cfg = method.cfg
+        self.tcfg: TrainConfig = method.cfg.train
+        self.sched = self.tcfg.schedule()
+        self.out = Path(out_dir)
+        self.progress = progress
+        self.on_iteration = on_iteration
+        self.fingerprint = fingerprint(method.name, self.cfg, self.dataset)
+        self.extent = scene_extent(self.dataset)
+        self.rng = np.random.default_rng(self.tcfg.seed)
+        self.torch_gen = torch.Generator().manual_seed(self.tcfg.seed)
+        self.log: list[dict] = []
+        self.wall_s = 0.0
+        self.iteration = 0
+        self._order: list[int] = []
+
+    # -- set-up -----------------------------------------------------------------------------------
+    def _new_model(self) -> DynamicGaussians:
+        channels = self.method.channels()
+        pts = initial_points(self.dataset, self.tcfg)
+        gaussians = GaussianModel.from_points(pts, sh_degree=self.tcfg.sh_degree, channels=channels,
+                                              init_opacity=self.tcfg.init.init_opacity)
+        torch.manual_seed(self.tcfg.seed)
+        deform = DeformationField()
+        bg = list(self.tcfg.background) if self.tcfg.background is not None else scene_background(self.dataset, channels)
+        if channels == 1 and len(bg) == 3:
+            bg = [float(linear_to_srgb(rec709_luma(srgb_to_linear(np.asarray(bg)))))]
+        meta = ModelMeta(method=self.method.name, channels=channels, sh_degree=self.tcfg.sh_degree, background=bg,
+                         extent=self.extent, duration_us=self.dataset.duration_us,
+                         deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.config.name,
+                         config=to_dict(self.cfg))
+        return DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
+
+    def _optimizer(self) -> torch.optim.Adam:
+        g, lr = self.model.gaussians, self.tcfg.lr
+        groups = [
+            {"params": [g.means], "lr": lr.position_init * self.extent, "name": "means"},
+            {"params": [g.sh_dc], "lr": lr.feature, "name": "sh_dc"},
+            {"params": [g.sh_rest], "lr": lr.feature / 20.0, "name": "sh_rest"},
+            {"params": [g.opacity_logits], "lr": lr.opacity, "name": "opacity"},
+            {"params": [g.log_scales], "lr": lr.scaling, "name": "scaling"},
+            {"params": [g.quats], "lr": lr.rotation, "name": "rotation"},
+            {"params": list(self.model.deform.parameters()), "lr": lr.position_init * lr.deform_scale, "name": "deform"},
+        ] + self.method.extra_parameters()
+        return torch.optim.Adam(groups, lr=0.0, eps=1e-15)
+
+    def _update_lrs(self, it: int) -> None:
+        lr = self.tcfg.lr
+        for group in self.optimizer.param_groups:
+            if group["name"] == "means":
+                group["lr"] = position_lr(it, lr.position_init * self.extent, lr.position_final * self.extent,
+                                          self.sched.position_lr_steps)
+            elif group["name"] == "deform":  # decays over the iterations after the warm-up
+                warm = self.sched.warm_up
+                group["lr"] = position_lr(it - warm, lr.position_init * lr.deform_scale, lr.position_final,
+                                          max(self.sched.deform_lr_steps - warm, 1))
+
+    def next_index(self, n: int) -> int:
+        """Training items in random order without replacement, reshuffled every epoch (seeded)."""
+        if not self._order:
+            self._order = self.rng.permutation(n).tolist()
+        return self._order.pop()
+
+    # -- checkpoints --------------------------------------------------------------------------------
+    def _check_out_dir(self) -> None:
+        run = self.out / "run.json"
+        if run.exists():
+            info = json.loads(run.read_text())
+            if info.get("fingerprint") != self.fingerprint:
+                raise TrainingError(
+                    f"{self.out}: holds a different run (method {info.get('method')!r}, fingerprint "
+                    f"{info.get('fingerprint')}; this run is {self.method.name!r}, {self.fingerprint}: the "
+                    "config or the dataset differ). Use another output folder or delete this one.")
+        else:
+            self.out.mkdir(parents=True, exist_ok=True)
+            write_text_atomic(run, json.dumps({"method": self.method.name, "fingerprint": self.fingerprint,
+                                               "scene_dir": str(self.dataset.dir.resolve()),
+                                               "config": to_dict(self.cfg)}, indent=1))
+            write_text_atomic(self.out / "config.yaml", dump_config(self.cfg))
+
+    def _save_checkpoint(self) -> None:
+        state = {"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint, "iteration": self.iteration,
+                 "wall_s": self.wall_s, "model": self.model.state(), "optimizer": self.optimizer.state_dict(),
+                 "stats": self.stats.state_dict(), "method": self.method.state_dict(),
+                 "rng": json.dumps(self.rng.bit_generator.state), "torch_rng": self.torch_gen.get_state(),
+                 "order": list(self._order), "log": json.dumps(self.log)}
+        with atomic_output(self.out / "checkpoint.pt") as tmp:
+            torch.save(state, tmp)
+        self._write_log()
+
+    def _load_checkpoint(self) -> bool:
+        path = self.out / "checkpoint.pt"
+        if not path.exists():
+            return False
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        if state.get("format") != CHECKPOINT_FORMAT or state.get("fingerprint") != self.fingerprint:
+            raise TrainingError(f"{path}: checkpoint of a different run; delete it or use another output folder")
+        self.model = DynamicGaussians.from_state(state["model"], str(path))
+        self.method.load_state_dict(state["method"])
+        self.optimizer = self._optimizer()
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.stats = DensifyStats(len(self.model))
+        self.stats.load_state_dict(state["stats"])
+        self.rng.bit_generator.state = json.loads(state["rng"])
+        self.torch_gen.set_state(state["torch_rng"])
+        self._order = list(state["order"])
+        self.iteration, self.wall_s = int(state["iteration"]), float(state["wall_s"])
+        self.log = json.loads(state["log"])
+        return True
+
+    def _write_log(self) -> None:
+        write_text_atomic(self.out / "log.jsonl", "".join(json.dumps(r) + "\n" for r in self.log))
+
+    # -- evaluation -------------------------------------------------------------------------------
+    def evaluate(self) -> float:
+        records = self.dataset.frames("test")
+        if self.tcfg.eval_max_views and len(records) > self.tcfg.eval_max_views:
+            pick = np.linspace(0, len(records) - 1, self.tcfg.eval_max_views).round().astype(int)
+            records = [records[i] for i in pick]
+        return evaluate_psnr(self.method.eval_pairs(self.model, records))
+
+    def _snapshot_iterations(self) -> set[int]:
+        return {max(1, int(round(f * self.tcfg.iterations))) for f in self.tcfg.snapshots}
+
+    # -- the loop ---------------------------------------------------------------------------------
+    def run(self) -> DynamicGaussians:
+        final = self.out / "model.pt"
+        self._check_out_dir()
+        if final.exists():
+            from recon.model import load
+
+            return load(final)
+        if not self._load_checkpoint():
+            self.model = self._new_model()
+            self.optimizer = self._optimizer()
+            self.stats = DensifyStats(len(self.model))
+        cfg, sched = self.tcfg, self.sched
+        snaps = self._snapshot_iterations()
+        bar = tqdm(total=cfg.iterations, initial=self.iteration, disable=not self.progress,
+                   desc=f"{self.method.name} {self.dataset.config.name}", dynamic_ncols=True)
+        g = self.model.gaussians
+        while self.iteration < cfg.iterations:
+            it = self.iteration + 1
+            t0 = time.perf_counter()
+            self._update_lrs(it)
+            g = self.model.gaussians
+            g.active_sh_degree = min(cfg.sh_degree, it // sched.sh_interval)
+            self.model.meta.active_sh_degree = g.active_sh_degree
+            self.model.meta.deform_enabled = cfg.deform and it > sched.warm_up
+            loss, renders = self.method.step(self, it)
+            loss_value = float(loss.detach())
+            if not math.isfinite(loss_value):
+                raise TrainingError(f"{self.method.name}: loss is {loss.item()} at iteration {it}; stopping "
+                                    "(the last checkpoint is kept)")
+            loss.backward()
+            info = {}
+            with torch.no_grad():
+                d = cfg.densify
+                if d.enabled and it < sched.densify_stop:
+                    for out, cam in renders:
+                        self.stats.add(out, cam.width, cam.height)
+                    if it > sched.densify_start and it % sched.densify_interval == 0:
+                        info = densify_and_prune(g, self.stats, d, self.extent, self.optimizer,
+                                                 prune_large=it > sched.opacity_reset_interval,
+                                                 generator=self.torch_gen,
+                                                 extra_prune=self.method.prune_mask(self, it))
+                    if d.opacity_reset and it % sched.opacity_reset_interval == 0:
+                        reset_opacity(g, self.optimizer)
+                elif (mask := self.method.prune_mask(self, it)) is not None and bool(mask.any()):
+                    g.prune(~mask, self.optimizer)
+                    self.stats.reset(len(g))
+                if len(g) == 0:
+                    raise TrainingError(f"{self.method.name}: every Gaussian was pruned at iteration {it} "
+                                        f"({info}); nothing is left to render")
+                self.optimizer.step()
+                self.optimizer.zero_grad(set_to_none=True)
+            self.wall_s += time.perf_counter() - t0
+            self.iteration = it
+            row = {"iteration": it, "wall_s": round(self.wall_s, 3), "loss": round(loss_value, 6),
+                   "n_gaussians": len(g)}
+            do_eval = it in snaps or (cfg.eval_every and it % cfg.eval_every == 0)
+            if do_eval:
+                self.model.meta.iteration = it
+                row["test_psnr"] = round(self.evaluate(), 3)
+                if it in snaps:
+                    self.model.save(self.out / "snapshots" / f"iter_{it:06d}.pt")
+                    row["snapshot"] = f"snapshots/iter_{it:06d}.pt"
+            if info:
+                row["densify"] = info
+            if do_eval or info or it % 10 == 0 or it == 1:
+                self.log.append(row)
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss_value:.4f}", n=len(g),
+                            **({"psnr": row["test_psnr"]} if "test_psnr" in row else {}))
+            if it % cfg.checkpoint_every == 0 and it < cfg.iterations:
+                self._save_checkpoint()
+            if self.on_iteration is not None:
+                self.on_iteration(self, it)
+        bar.close()
+        self.model.meta.iteration = self.iteration
+        self.model.save(final)
+        self._write_log()
+        (self.out / "checkpoint.pt").unlink(missing_ok=True)
+        return self.model
