@@ -35,6 +35,10 @@ class DensifyStats:
         self.grad_accum[visible] += g[visible].norm(dim=-1).to(self.grad_accum.dtype)
         self.count[visible] += 1
 
+    def keep(self, mask: torch.Tensor) -> None:
+        """Drop the rows of pruned Gaussians (mask [N] bool: kept)."""
+        self.grad_accum, self.count, self.max_radii = self.grad_accum[mask], self.count[mask], self.max_radii[mask]
+
     def reset(self, n: int) -> None:
         self.__init__(n)
 

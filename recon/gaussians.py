@@ -6,6 +6,10 @@ opacity_logits [N] (sigmoid), SH coefficients sh_dc [N,1,C] and sh_rest [N,(deg+
 Densification edits the parameters and the Adam state together: `prune` drops rows, `clone`
 appends copies, `split` replaces each selected Gaussian by `n` children sampled inside it with
 scales divided by 0.8 n; children inherit every other parameter of their parent.
+
+Optional `anchors` [N, 3] (a buffer, not optimised): the deformation field's per-Gaussian input when
+set (E-4DGS: children inherit their parent's deformation input, so a split child moves as its
+parent did). None means the field reads the canonical means (D3DGS).
 """
 from __future__ import annotations
 
@@ -48,6 +52,11 @@ class GaussianModel(nn.Module):
         self.opacity_logits = nn.Parameter(torch.zeros(n))
         self.sh_dc = nn.Parameter(torch.zeros(n, 1, channels))
         self.sh_rest = nn.Parameter(torch.zeros(n, k - 1, channels))
+        self.register_buffer("anchors", None)
+
+    def deformation_inputs(self) -> torch.Tensor:
+        """[N, 3] what the deformation field reads per Gaussian (anchors if set, else the means)."""
+        return self.anchors if self.anchors is not None else self.means
 
     @classmethod
     def from_points(cls, points, colors=None, sh_degree: int = 3, channels: int = 3,
@@ -103,12 +112,16 @@ class GaussianModel(nn.Module):
     def prune(self, keep: torch.Tensor, optimizer=None) -> None:
         """Keep the Gaussians where keep [N] (bool) is True."""
         self._edit(optimizer, lambda t: t[keep].clone(), lambda s: s[keep].clone())
+        if self.anchors is not None:
+            self.anchors = self.anchors[keep].clone()
 
     def clone_selected(self, mask: torch.Tensor, optimizer=None) -> None:
         """Append copies of the selected Gaussians (3DGS clone; new Adam moments are zero)."""
         n_new = int(mask.sum())
         self._edit(optimizer, lambda t: torch.cat([t, t[mask]]),
                    lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype)]))
+        if self.anchors is not None:
+            self.anchors = torch.cat([self.anchors, self.anchors[mask]])
 
     def split_selected(self, mask: torch.Tensor, n: int = 2, optimizer=None, generator=None) -> None:
         """Replace each selected Gaussian by n children sampled from it, scales / (0.8 n)."""
@@ -132,6 +145,8 @@ class GaussianModel(nn.Module):
             old = getattr(self, name)
             self._replace(optimizer, name, param(old.detach(), name),
                            lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype)]))
+        if self.anchors is not None:  # children read their parent's deformation input
+            self.anchors = torch.cat([self.anchors, self.anchors[idx].repeat(n, 1)])
         keep = torch.ones(len(self), dtype=torch.bool)
         keep[idx] = False
         self.prune(keep, optimizer)

@@ -99,6 +99,8 @@ class DynamicGaussians:
         meta = ModelMeta(**copy.deepcopy(state["meta"]))
         n = state["gaussians"]["means"].shape[0]
         gaussians = GaussianModel(n, meta.sh_degree, meta.channels)
+        if "anchors" in state["gaussians"]:
+            gaussians.anchors = torch.zeros(n, 3)
         gaussians.load_state_dict(state["gaussians"])
         gaussians.active_sh_degree = meta.active_sh_degree
         deform = DeformationField()

@@ -37,7 +37,7 @@ def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float,
         return means, quats, log_scales
     ctx = torch.autocast("cpu", dtype=torch.bfloat16) if bf16 and means.device.type == "cpu" else contextlib.nullcontext()
     with ctx:
-        dx, dq, ds = field(means, t)
+        dx, dq, ds = field(gaussians.deformation_inputs(), t)
     return means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype)
 
 

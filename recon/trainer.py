@@ -53,6 +53,9 @@ class Method:
     def channels(self) -> int:
         raise NotImplementedError
 
+    def setup_model(self, model: DynamicGaussians) -> None:
+        """Adjust a freshly initialised model (e.g. give it deformation anchors)."""
+
     def extra_parameters(self) -> list[dict]:
         """Additional Adam groups (dicts with params, lr, name)."""
         return []
@@ -62,7 +65,7 @@ class Method:
         raise NotImplementedError
 
     def prune_mask(self, trainer: "Trainer", iteration: int) -> torch.Tensor | None:
-        """Extra Gaussians to prune at a densification step (bool [N]) or None."""
+        """Gaussians to prune at this iteration (bool [N]) or None (called every iteration, after backward)."""
         return None
 
     def eval_pairs(self, model: DynamicGaussians, records) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -150,7 +153,9 @@ class Trainer:
                          extent=self.extent, duration_us=self.dataset.duration_us,
                          deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.config.name,
                          config=to_dict(self.cfg))
-        return DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
+        model = DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
+        self.method.setup_model(model)
+        return model
 
     def _optimizer(self) -> torch.optim.Adam:
         g, lr = self.model.gaussians, self.tcfg.lr
@@ -277,19 +282,24 @@ class Trainer:
             info = {}
             with torch.no_grad():
                 d = cfg.densify
+                extra = self.method.prune_mask(self, it)   # a method's own pruning (E-4DGS: IIP)
+                densify_now = d.enabled and sched.densify_start < it < sched.densify_stop and \
+                    it % sched.densify_interval == 0
                 if d.enabled and it < sched.densify_stop:
                     for out, cam in renders:
                         self.stats.add(out, cam.width, cam.height)
-                    if it > sched.densify_start and it % sched.densify_interval == 0:
-                        info = densify_and_prune(g, self.stats, d, self.extent, self.optimizer,
-                                                 prune_large=it > sched.opacity_reset_interval,
-                                                 generator=self.torch_gen,
-                                                 extra_prune=self.method.prune_mask(self, it))
-                    if d.opacity_reset and it % sched.opacity_reset_interval == 0:
-                        reset_opacity(g, self.optimizer)
-                elif (mask := self.method.prune_mask(self, it)) is not None and bool(mask.any()):
-                    g.prune(~mask, self.optimizer)
-                    self.stats.reset(len(g))
+                if densify_now:
+                    if g.anchors is not None:  # deformation inputs follow the means between edits
+                        g.anchors = g.means.detach().clone()
+                    info = densify_and_prune(g, self.stats, d, self.extent, self.optimizer,
+                                             prune_large=it > sched.opacity_reset_interval,
+                                             generator=self.torch_gen, extra_prune=extra)
+                elif extra is not None and bool(extra.any()):
+                    g.prune(~extra, self.optimizer)
+                    self.stats.keep(~extra)
+                    info = {"pruned": int(extra.sum())}
+                if d.enabled and d.opacity_reset and it < sched.densify_stop and it % sched.opacity_reset_interval == 0:
+                    reset_opacity(g, self.optimizer)
                 if len(g) == 0:
                     raise TrainingError(f"{self.method.name}: every Gaussian was pruned at iteration {it} "
                                         f"({info}); nothing is left to render")

@@ -184,3 +184,13 @@ def test_cli_train_and_render(motion_scene, tmp_path):
     assert sorted(p.name for p in (tmp_path / "img").iterdir()) == ["cam1_t0.0000.png", "cam1_t0.5000.png"]
     r = subprocess.run(cmd[:-4] + ["--set", "train.bogus=1"], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode != 0 and "train.bogus: unknown key" in r.stderr
+
+
+def test_partial_config_keeps_the_method_defaults(tmp_path):
+    cfg = recon.resolve_config("e4dgs", overrides={"train.iterations": 10})
+    assert not cfg.train.densify.opacity_reset and cfg.train.densify.grad_threshold == 3e-3
+    y = tmp_path / "c.yaml"
+    y.write_text("train: {densify: {interval: 7}}\nevents: {aes: false}\n")
+    cfg = recon.resolve_config("e4dgs", y)
+    assert cfg.train.densify.interval == 7 and not cfg.train.densify.opacity_reset and not cfg.events.aes
+    assert recon.resolve_config("d3dgs", overrides={"train.iterations": 10}).train.densify.opacity_reset

@@ -11,7 +11,7 @@ import importlib
 METHODS: dict[str, type] = {}
 
 # modules that register methods when imported
-_MODULES = ("recon.methods.d3dgs",)
+_MODULES = ("recon.methods.d3dgs", "recon.methods.e4dgs")
 
 
 def register(cls: type) -> type:

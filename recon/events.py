@@ -1,0 +1,89 @@
+"""Event supervision of E-4DGS as pure functions (paper, sections 3.2 and 3.4).
+
+Ground truth of a window (t_start, t_end]:
+    dE_gt(u)  = sum over its events at u of p * C^p      (log units; C^p the simulator's thresholds)
+    N_gt(u)   = dE_gt(u) / C_ref                        (C_ref = (C+ + C-) / 2; = the signed count when
+                                                         C+ = C-), and on pixels without events
+                                                         dE_gt gets Gaussian noise of std sigma (ESS jitter)
+Prediction from two renders of the model at the window's end points:
+    N_pred(u) = (L_hat(u, t_end) - L_hat(u, t_start)) / C_hat,   L_hat = response(linear(render))
+Loss: L_recon = mean_u sqrt((N_gt - N_pred)^2 + eps^2), eps = 1e-3; L_TV = mean |grad| of the
+rendered image (anisotropic total variation).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+REC709 = (0.2126, 0.7152, 0.0722)
+
+
+def count_map(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Sum of polarities per pixel: [H, W] float64 (x, y, p [N]; p in {-1, +1})."""
+    flat = np.asarray(y, np.int64) * width + np.asarray(x, np.int64)
+    return np.bincount(flat, weights=np.asarray(p, np.float64), minlength=width * height).reshape(height, width)
+
+
+def event_maps(x, y, p, width: int, height: int, c_pos: float, c_neg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(dE_gt [H, W] = sum p C^p in log units, triggered [H, W] bool: pixel has at least one event)."""
+    flat = np.asarray(y, np.int64) * width + np.asarray(x, np.int64)
+    pos = np.asarray(p) > 0
+    w = np.where(pos, c_pos, -c_neg)
+    de = np.bincount(flat, weights=w, minlength=width * height).reshape(height, width)
+    hits = np.bincount(flat, minlength=width * height).reshape(height, width) > 0
+    return de, hits
+
+
+def gt_counts(de_gt: np.ndarray, triggered: np.ndarray, c_ref: float, noise_sigma: float,
+              rng: np.random.Generator | None) -> np.ndarray:
+    """N_gt [H, W] float32: dE_gt / C_ref, with N(0, noise_sigma^2) (log units) on event-free pixels."""
+    de = np.array(de_gt, np.float64)
+    if noise_sigma > 0 and rng is not None:
+        quiet = ~triggered
+        de[quiet] = rng.normal(0.0, noise_sigma, int(quiet.sum()))
+    return (de / c_ref).astype(np.float32)
+
+
+def srgb_to_linear_t(v: torch.Tensor) -> torch.Tensor:
+    """Differentiable sRGB decoding (values above 1 follow the power branch)."""
+    v = v.clamp_min(0.0)
+    return torch.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def luminance_t(linear: torch.Tensor) -> torch.Tensor:
+    """[H, W, C] linear -> [H, W] (C = 1: itself; C = 3: Rec.709 luma)."""
+    if linear.shape[-1] == 1:
+        return linear[..., 0]
+    w = torch.tensor(REC709, dtype=linear.dtype, device=linear.device)
+    return linear @ w
+
+
+def log_response_t(linear: torch.Tensor, mode: str = "log", eps: float = 1e-3, linlog_threshold_dn: float = 20.0,
+                   dn_per_unit: float = 255.0) -> torch.Tensor:
+    """The simulator's response in torch: log(I + eps), or v2e's lin-log on DN = dn_per_unit * I."""
+    if mode == "log":
+        return torch.log(linear.clamp_min(0.0) + eps)
+    if mode == "linlog":
+        dn = linear.clamp_min(0.0) * dn_per_unit
+        slope = math.log(linlog_threshold_dn) / linlog_threshold_dn
+        return torch.where(dn <= linlog_threshold_dn, dn * slope, torch.log(dn.clamp_min(linlog_threshold_dn)))
+    raise ValueError(f"unknown response mode {mode!r} (expected 'log' or 'linlog')")
+
+
+def predicted_counts(l_start: torch.Tensor, l_end: torch.Tensor, c_hat: torch.Tensor) -> torch.Tensor:
+    """N_pred = (L_hat(t_end) - L_hat(t_start)) / C_hat, [H, W]."""
+    return (l_end - l_start) / c_hat
+
+
+def recon_loss(n_gt: torch.Tensor, n_pred: torch.Tensor, eps: float = 1e-3) -> torch.Tensor:
+    """mean sqrt((N_gt - N_pred)^2 + eps^2): a smooth L1 that stays differentiable at 0."""
+    return torch.sqrt((n_gt - n_pred) ** 2 + eps * eps).mean()
+
+
+def tv_loss(img: torch.Tensor) -> torch.Tensor:
+    """Anisotropic total variation of an image [H, W] or [H, W, C]: mean absolute neighbour difference."""
+    dy = (img[1:] - img[:-1]).abs().mean() if img.shape[0] > 1 else img.new_zeros(())
+    dx = (img[:, 1:] - img[:, :-1]).abs().mean() if img.shape[1] > 1 else img.new_zeros(())
+    return dx + dy

@@ -1,0 +1,210 @@
+"""E-4DGS (paper sections 3-4): deformable Gaussians supervised by multi-view events.
+
+`e4dgs` trains a grayscale model on events alone; `e4dgs_rgb` a colour model on events plus the
+blurred RGB frames of one level. Model outputs are sRGB-encoded like the dataset's images; the event
+loss decodes them to linear light and applies the simulator's response (log(I + eps) or lin-log,
+read from the event files), so L_hat is the quantity the events measure. Each step:
+
+1. ESS: a camera and a window of N events (recon.event_windows); N_gt from the events and the
+   simulator's thresholds, with N(0, sigma) jitter on event-free pixels (recon.events.gt_counts);
+2. two renders at the window's end points, poses interpolated along the camera's trajectory;
+3. AES: N_pred = (L_hat(t_end) - L_hat(t_start)) / C_hat with a learnable C_hat = exp(log_c);
+4. L = 1.0 L_recon + 0.005 TV(render at t_end) [+ 1.0 (L1 + D-SSIM) on a blurred frame].
+
+IIP prunes by importance (the rasterizer's max alpha x transmittance over the training cameras at
+`iip_times` timestamps); there is no opacity reset. Test views are scored after per-image colour
+correction on log intensity (recon.color).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from datagen.dataset import DatasetError, SceneDataset
+from recon import events as ev
+from recon.color import correct_colors
+from recon.config import E4DGSConfig
+from recon.event_windows import WindowSampler
+from recon.losses import photometric_loss
+from recon.methods import register
+from recon.methods.d3dgs import load_frame, record_camera
+from recon.model import DynamicGaussians
+from recon.raster import Camera
+from recon.render import camera_from_pose
+from recon.trainer import Method
+
+PAPER_PIXELS = 346 * 260
+
+
+def linear_to_srgb_t(v: torch.Tensor) -> torch.Tensor:
+    v = v.clamp_min(0.0)
+    return torch.where(v <= 0.0031308, 12.92 * v, 1.055 * v.clamp_min(0.0031308) ** (1 / 2.4) - 0.055)
+
+
+@dataclass
+class BlurView:
+    cameras: list[Camera]     # one per sample time across the exposure
+    times: list[float]        # normalised
+    image: torch.Tensor       # [H, W, 3] sRGB
+
+
+@register
+class E4DGS(Method):
+    name = "e4dgs"
+    config_cls = E4DGSConfig
+    uses_rgb = False
+
+    def __init__(self, dataset: SceneDataset, cfg: E4DGSConfig):
+        super().__init__(dataset, cfg)
+        e = cfg.events
+        paths = [dataset.event_file(k) for k in range(dataset.n_cameras)]
+        for p in paths:
+            if not p.exists():
+                raise DatasetError(f"{p}: missing event file")
+        self.n_range = self.window_counts(dataset, e, paths)
+        n_fixed = int(round(sum(self.n_range) / 2))
+        self.sampler = WindowSampler(paths, self.n_range if e.ess else None, n_fixed)
+        src = self.sampler.sources[0]
+        self.c_pos, self.c_neg = src.thresholds()
+        self.c_ref = 0.5 * (self.c_pos + self.c_neg)
+        info = src.info
+        self.response = {"mode": str(info.get("sim_log_mode", "log")), "eps": float(info.get("sim_log_eps", 1e-3)),
+                         "linlog_threshold_dn": float(info.get("sim_linlog_threshold_dn", 20.0)),
+                         "dn_per_unit": float(info.get("sim_linlog_dn_per_unit", 255.0))}
+        self.log_c = nn.Parameter(torch.tensor(math.log(e.c_init)), requires_grad=e.aes)
+        self.blur_views = self._blur_views() if self.uses_rgb else []
+
+    @staticmethod
+    def window_counts(dataset: SceneDataset, e, paths) -> tuple[int, int]:
+        """[N_min, N_max] for this dataset (see EventConfig): window_fraction of the smallest camera's
+        stream, or the paper's range scaled by the pixel count; capped at max_window_fraction."""
+        from simulator.h5io import read_info
+
+        smallest = min(read_info(p)["n_events"] for p in paths)
+        if e.window_scale == "rate":
+            lo, hi = (f * smallest for f in e.window_fraction)
+        else:
+            lo, hi = e.n_events_object if dataset.config.kind == "object" else e.n_events_room
+            ratio = dataset.intrinsics.width * dataset.intrinsics.height / PAPER_PIXELS
+            lo, hi = lo * ratio, hi * ratio
+        cap = max(1, int(e.max_window_fraction * smallest))
+        return min(max(1, round(lo)), cap), min(max(1, round(hi)), cap)
+
+    @property
+    def c_hat(self) -> torch.Tensor:
+        return torch.exp(self.log_c)
+
+    def channels(self) -> int:
+        return 3 if self.uses_rgb else 1
+
+    def setup_model(self, model: DynamicGaussians) -> None:
+        if self.cfg.events.inherit_deformation:
+            model.gaussians.anchors = model.gaussians.means.detach().clone()
+
+    def extra_parameters(self) -> list[dict]:
+        return [{"params": [self.log_c], "lr": self.cfg.events.c_lr, "name": "c_hat"}] if self.cfg.events.aes else []
+
+    def state_dict(self) -> dict:
+        return {"log_c": self.log_c.detach().clone()}
+
+    def load_state_dict(self, state: dict) -> None:
+        with torch.no_grad():
+            self.log_c.copy_(state["log_c"])
+
+    # -- data -----------------------------------------------------------------------------------
+    def _blur_views(self) -> list[BlurView]:
+        ds, cfg = self.dataset, self.cfg
+        intr = ds.intrinsics
+        views = []
+        for rec in ds.blurred_frames(cfg.rgb_frames):
+            if cfg.rgb_render == "mean" and rec.exposure_us is not None:
+                t_us = np.linspace(rec.exposure_us[0], rec.exposure_us[1], cfg.rgb_samples)
+            else:
+                t_us = np.array([rec.t_us])
+            cams = [camera_from_pose(intr.K, ds.pose(rec.camera, t), intr.width, intr.height) for t in t_us]
+            views.append(BlurView(cams, [float(t) / ds.duration_us for t in t_us],
+                                  torch.from_numpy(load_frame(ds, rec, 3))))
+        return views
+
+    def _camera_at(self, k: int, t_us: int) -> Camera:
+        intr = self.dataset.intrinsics
+        return camera_from_pose(intr.K, self.dataset.pose(k, t_us), intr.width, intr.height)
+
+    def log_intensity(self, image: torch.Tensor) -> torch.Tensor:
+        """Rendered sRGB image [H, W, C] -> L_hat [H, W] through the simulator's response."""
+        lum = ev.luminance_t(ev.srgb_to_linear_t(image))
+        r = self.response
+        return ev.log_response_t(lum, r["mode"], r["eps"], r["linlog_threshold_dn"], r["dn_per_unit"])
+
+    # -- one iteration --------------------------------------------------------------------------
+    def event_loss(self, trainer, window):
+        ds, e = self.dataset, self.cfg.events
+        t_s, t_e = window.t_start_us / ds.duration_us, window.t_end_us / ds.duration_us
+        cam_s, cam_e = self._camera_at(window.camera, window.t_start_us), self._camera_at(window.camera, window.t_end_us)
+        out_s = trainer.model.render_output(cam_s, min(max(t_s, 0.0), 1.0), trainer.tcfg.backend)
+        out_e = trainer.model.render_output(cam_e, min(max(t_e, 0.0), 1.0), trainer.tcfg.backend)
+        intr = ds.intrinsics
+        de, hits = ev.event_maps(window.x, window.y, window.p, intr.width, intr.height, self.c_pos, self.c_neg)
+        n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0, trainer.rng))
+        n_pred = ev.predicted_counts(self.log_intensity(out_s.image), self.log_intensity(out_e.image), self.c_hat)
+        loss = e.lambda_recon * ev.recon_loss(n_gt, n_pred, e.recon_eps)
+        if e.lambda_tv > 0:
+            loss = loss + e.lambda_tv * ev.tv_loss(out_e.image)
+        return loss, [(out_s, cam_s), (out_e, cam_e)]
+
+    def rgb_loss(self, trainer):
+        view = self.blur_views[trainer.next_index(len(self.blur_views))]
+        outs = [trainer.model.render_output(c, t, trainer.tcfg.backend) for c, t in zip(view.cameras, view.times)]
+        if len(outs) == 1:
+            pred = outs[0].image
+        else:  # blur = mean of linear light over the exposure
+            pred = linear_to_srgb_t(torch.stack([ev.srgb_to_linear_t(o.image) for o in outs]).mean(0))
+        loss = photometric_loss(pred, view.image, self.cfg.lambda_dssim)
+        return loss, list(zip(outs, view.cameras))
+
+    def step(self, trainer, iteration: int):
+        loss, renders = self.event_loss(trainer, self.sampler.sample(trainer.rng))
+        if self.uses_rgb and self.cfg.lambda_rgb > 0:
+            l_rgb, more = self.rgb_loss(trainer)
+            loss, renders = loss + self.cfg.lambda_rgb * l_rgb, renders + more
+        for out, _ in renders:
+            if out.means2d.requires_grad:
+                out.means2d.retain_grad()
+        return loss, renders
+
+    # -- intensity importance pruning -----------------------------------------------------------
+    def importance(self, model: DynamicGaussians) -> torch.Tensor:
+        """w_i = max over the training cameras x iip_times timestamps of the Gaussian's largest
+        alpha x transmittance on any pixel [N]."""
+        w = torch.zeros(len(model))
+        ds = self.dataset
+        for k in range(ds.n_cameras):
+            for t in np.linspace(0.0, 1.0, self.cfg.events.iip_times):
+                out = model.render_output(self._camera_at(k, int(round(t * ds.duration_us))), float(t))
+                w = torch.maximum(w, out.max_weight.detach())
+        return w
+
+    def prune_mask(self, trainer, iteration: int):
+        e = self.cfg.events
+        if not e.iip or iteration % trainer.tcfg.scaled(e.iip_interval) != 0:
+            return None
+        return self.importance(trainer.model) < e.iip_threshold
+
+    # -- evaluation -----------------------------------------------------------------------------
+    def eval_pairs(self, model: DynamicGaussians, records):
+        pairs = []
+        for rec in records:
+            pred = model.render(record_camera(self.dataset, rec), rec.time).numpy()
+            gt = load_frame(self.dataset, rec, self.channels())
+            pairs.append((correct_colors(pred, gt)[0], gt))
+        return pairs
+
+
+@register
+class E4DGSRGB(E4DGS):
+    name = "e4dgs_rgb"
+    uses_rgb = True

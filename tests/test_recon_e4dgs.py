@@ -1,0 +1,140 @@
+"""E-4DGS on the tiny moving scene: events-only training recovers held-out frames, and every
+ablation switch changes exactly what it says."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import recon
+from datagen.dataset import SceneDataset
+from recon.evaluate import evaluate_psnr
+from recon.methods.e4dgs import E4DGS, E4DGSRGB
+from recon.trainer import Trainer
+
+SMALL = {"train.init.n_points_object": 2000, "train.deform_bf16": True, "train.lr.feature": 0.01,
+         "train.snapshots": [1.0], "train.checkpoint_every": 5000}
+TRAIN_ITERS = 1000   # with densification off to stay fast (measured: 26.96 dB at 1,000, 27.36 at 1,500)
+# stated target: held-out PSNR after colour correction (an untrained model scores ~25.1 dB here,
+# the flat background after correction); measured in docs/e4dgs.md
+HELD_OUT_PSNR_MIN = 26.5
+OVER_UNTRAINED_DB = 1.0
+
+
+def trainer_for(scene, tmp_path, method="e4dgs", **overrides):
+    cfg = recon.resolve_config(method, overrides={**SMALL, **overrides})
+    tr = Trainer(recon.get_method(method)(SceneDataset(scene), cfg), tmp_path / method, progress=False)
+    tr.model = tr._new_model()
+    tr.optimizer = tr._optimizer()
+    from recon.densify import DensifyStats
+
+    tr.stats = DensifyStats(len(tr.model))
+    return tr
+
+
+def test_events_only_training_recovers_held_out_frames(motion_scene, tmp_path):
+    ds = SceneDataset(motion_scene)
+    untrained = trainer_for(motion_scene, tmp_path / "u")
+    before = evaluate_psnr(untrained.method.eval_pairs(untrained.model, ds.frames("test")))
+    model = recon.fit(motion_scene, "e4dgs", overrides={**SMALL, "train.iterations": TRAIN_ITERS,
+                                                        "train.densify.enabled": False},
+                      out_dir=tmp_path / "run", progress=False)
+    method = E4DGS(ds, recon.resolve_config("e4dgs"))
+    after = evaluate_psnr(method.eval_pairs(model, ds.frames("test")))
+    assert model.meta.channels == 1 and model.meta.method == "e4dgs"
+    assert after >= HELD_OUT_PSNR_MIN and after > before + OVER_UNTRAINED_DB, (before, after)
+
+
+def test_ess_switch_fixes_the_count_and_drops_the_jitter(motion_scene, tmp_path):
+    on = trainer_for(motion_scene, tmp_path / "on")
+    off = trainer_for(motion_scene, tmp_path / "off", **{"events.ess": False})
+    rng = np.random.default_rng(0)
+    counts_on = {len(on.method.sampler.sample(rng)) for _ in range(30)}
+    counts_off = {off.method.sampler.sample(rng).x.size for _ in range(30)}
+    lo, hi = on.method.n_range
+    assert len(counts_on) > 5 and min(counts_on) >= lo - 50 and max(counts_on) <= hi + 50
+    fixed = round((lo + hi) / 2)
+    assert all(abs(c - fixed) <= 50 for c in counts_off)          # ties at the window ends only
+    # without ESS, event-free pixels carry exactly zero
+    win = off.method.sampler.sample(rng)
+    loss_a, _ = off.method.event_loss(off, win)
+    loss_b, _ = off.method.event_loss(off, win)
+    assert loss_a.item() == loss_b.item()                          # no random jitter drawn
+    loss_c, _ = on.method.event_loss(on, win)
+    loss_d, _ = on.method.event_loss(on, win)
+    assert loss_c.item() != loss_d.item()                          # jitter drawn per step
+
+
+def test_aes_switch_learns_or_freezes_the_threshold(motion_scene, tmp_path):
+    for aes in (True, False):
+        tr = trainer_for(motion_scene, tmp_path / str(aes), **{"events.aes": aes})
+        for it in range(1, 6):
+            loss, _ = tr.method.step(tr, it)
+            loss.backward()
+            tr.optimizer.step()
+            tr.optimizer.zero_grad()
+        c = tr.method.c_hat.item()
+        if aes:
+            assert c != pytest.approx(0.15, abs=1e-6) and c > 0
+        else:
+            assert c == pytest.approx(0.15, abs=1e-7)
+            assert all(g["name"] != "c_hat" for g in tr.optimizer.param_groups)
+
+
+def test_tv_switch_changes_the_loss_by_its_term(motion_scene, tmp_path):
+    from recon import events as ev
+
+    with_tv = trainer_for(motion_scene, tmp_path / "tv", **{"events.ess": False})
+    no_tv = trainer_for(motion_scene, tmp_path / "notv", **{"events.ess": False, "events.lambda_tv": 0.0})
+    no_tv.model = with_tv.model
+    win = with_tv.method.sampler.sample(np.random.default_rng(1))
+    a, renders = with_tv.method.event_loss(with_tv, win)
+    b, _ = no_tv.method.event_loss(no_tv, win)
+    tv = ev.tv_loss(renders[1][0].image)
+    assert a.item() == pytest.approx(b.item() + 0.005 * tv.item(), rel=1e-6)
+    assert tv.item() > 0
+
+
+def test_iip_switch_prunes_by_importance_only_when_on(motion_scene, tmp_path):
+    on = trainer_for(motion_scene, tmp_path / "on", **{"train.iterations": 4000})
+    off = trainer_for(motion_scene, tmp_path / "off", **{"train.iterations": 4000, "events.iip": False})
+    interval = on.tcfg.scaled(on.cfg.events.iip_interval)
+    assert on.method.prune_mask(on, interval - 1) is None and off.method.prune_mask(off, interval) is None
+    mask = on.method.prune_mask(on, interval)
+    w = on.method.importance(on.model)
+    assert mask.dtype == torch.bool and mask.shape == (len(on.model),)
+    assert torch.equal(mask, w < 0.015) and 0 < int(mask.sum()) < len(on.model)
+    # importance is the max over cameras and times of the rasterizer's max_weight
+    out = on.model.render_output(on.method._camera_at(0, 0), 0.0)
+    assert torch.all(w >= out.max_weight - 1e-7)
+
+
+def test_no_opacity_reset_and_children_inherit_the_deformation_input(motion_scene, tmp_path):
+    tr = trainer_for(motion_scene, tmp_path)
+    assert not tr.cfg.train.densify.opacity_reset
+    g = tr.model.gaussians
+    assert torch.equal(g.anchors, g.means)
+    parent = int(torch.argmax(g.scales.max(1).values))
+    anchor = g.anchors[parent].clone()
+    mask = torch.zeros(len(g), dtype=torch.bool)
+    mask[parent] = True
+    g.split_selected(mask, 2, tr.optimizer, torch.Generator().manual_seed(0))
+    assert torch.equal(g.anchors[-2:], anchor.expand(2, 3))          # children read the parent's input
+    assert not torch.equal(g.means[-2], g.means[-1])                 # though they sit elsewhere
+    off = trainer_for(motion_scene, tmp_path / "off", **{"events.inherit_deformation": False})
+    assert off.model.gaussians.anchors is None
+
+
+def test_rgb_variant_renders_blur_as_the_mean_over_the_exposure(motion_scene, tmp_path):
+    tr = trainer_for(motion_scene, tmp_path, "e4dgs_rgb", **{"rgb_frames": "strong", "rgb_samples": 4})
+    assert isinstance(tr.method, E4DGSRGB) and tr.model.meta.channels == 3
+    view = tr.method.blur_views[0]
+    rec = SceneDataset(motion_scene).blurred_frames("strong")[0]
+    assert len(view.cameras) == 4
+    assert view.times[0] == pytest.approx(rec.exposure_us[0] / tr.dataset.duration_us)
+    assert view.times[-1] == pytest.approx(rec.exposure_us[1] / tr.dataset.duration_us)
+    loss, renders = tr.method.step(tr, 1)
+    assert len(renders) == 2 + 4 and math.isfinite(loss.item())
+    centre = trainer_for(motion_scene, tmp_path / "c", "e4dgs_rgb", **{"rgb_frames": "strong", "rgb_render": "centre"})
+    assert len(centre.method.blur_views[0].cameras) == 1
+    assert centre.method.blur_views[0].times[0] == pytest.approx(rec.time, abs=1e-4)
