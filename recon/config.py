@@ -180,10 +180,12 @@ class EventConfig:
     lambda_recon: float = 1.0
     lambda_tv: float = 0.005           # 0 switches TV off
     # IIP: prune Gaussians whose largest alpha x transmittance over the training cameras at iip_times
-    # timestamps is below iip_threshold, every iip_interval iterations (reference iterations)
+    # timestamps is below iip_threshold, every iip_interval iterations from iip_start (reference
+    # iterations, scaled like the schedule)
     iip: bool = True
     iip_threshold: float = 0.015
-    iip_interval: int = 1000
+    iip_start: int = 3000              # after the warm-up: on the initial fog (opacity 0.1) most
+    iip_interval: int = 1000           # Gaussians score below 0.015 (lego: 10k of 20k at iteration 100)
     iip_times: int = 5
     inherit_deformation: bool = True   # clone / split children read their parent's deformation input
 

@@ -99,8 +99,11 @@ def test_iip_switch_prunes_by_importance_only_when_on(motion_scene, tmp_path):
     on = trainer_for(motion_scene, tmp_path / "on", **{"train.iterations": 4000})
     off = trainer_for(motion_scene, tmp_path / "off", **{"train.iterations": 4000, "events.iip": False})
     interval = on.tcfg.scaled(on.cfg.events.iip_interval)
-    assert on.method.prune_mask(on, interval - 1) is None and off.method.prune_mask(off, interval) is None
-    mask = on.method.prune_mask(on, interval)
+    start = on.tcfg.scaled(on.cfg.events.iip_start)
+    at = (start // interval + 1) * interval
+    assert on.method.prune_mask(on, at - 1) is None and off.method.prune_mask(off, at) is None
+    assert on.method.prune_mask(on, interval) is None                  # before iip_start
+    mask = on.method.prune_mask(on, at)
     w = on.method.importance(on.model)
     assert mask.dtype == torch.bool and mask.shape == (len(on.model),)
     assert torch.equal(mask, w < 0.015) and 0 < int(mask.sum()) < len(on.model)

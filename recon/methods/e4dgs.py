@@ -190,7 +190,8 @@ class E4DGS(Method):
 
     def prune_mask(self, trainer, iteration: int):
         e = self.cfg.events
-        if not e.iip or iteration % trainer.tcfg.scaled(e.iip_interval) != 0:
+        if not e.iip or iteration < trainer.tcfg.scaled(e.iip_start) or \
+                iteration % trainer.tcfg.scaled(e.iip_interval) != 0:
             return None
         return self.importance(trainer.model) < e.iip_threshold
 
