@@ -194,3 +194,25 @@ def test_partial_config_keeps_the_method_defaults(tmp_path):
     cfg = recon.resolve_config("e4dgs", y)
     assert cfg.train.densify.interval == 7 and not cfg.train.densify.opacity_reset and not cfg.events.aes
     assert recon.resolve_config("d3dgs", overrides={"train.iterations": 10}).train.densify.opacity_reset
+
+
+def test_initial_points_follow_the_scene_kind_and_options(motion_scene, tmp_path):
+    from recon.trainer import initial_points
+
+    ds = SceneDataset(motion_scene)
+    rig = ds.config.camera
+    cube = initial_points(ds, recon.resolve_config("d3dgs", overrides={"train.init.n_points_object": 500}).train)
+    assert cube.shape == (500, 3) and ds.config.kind == "object"
+    np.testing.assert_array_less(np.abs(cube - np.asarray(rig.target)), 0.35 * rig.radius + 1e-6)
+    ball = initial_points(ds, recon.resolve_config("d3dgs", overrides={
+        "train.init.kind": "sphere", "train.init.n_points_room": 2000}).train)
+    r = np.linalg.norm(ball - np.asarray(rig.target), axis=1)
+    assert ball.shape == (2000, 3) and r.max() <= 10.0 + 1e-4
+    assert np.mean(r < 5.0) == pytest.approx(0.5, abs=0.05)      # radius uniform: dense at the centre
+    pts = np.random.default_rng(0).normal(size=(40, 3)).astype(np.float32)
+    np.save(tmp_path / "cloud.npy", pts)
+    given = initial_points(ds, recon.resolve_config("d3dgs", overrides={
+        "train.init.kind": "points", "train.init.points_file": str(tmp_path / "cloud.npy")}).train)
+    np.testing.assert_array_equal(given, pts)
+    with pytest.raises(ConfigError, match="points_file: required"):
+        recon.resolve_config("d3dgs", overrides={"train.init.kind": "points"})
