@@ -21,7 +21,6 @@ import torch
 
 import recon
 from datagen.dataset import SceneDataset
-from recon.densify import DensifyStats
 from recon.methods import get_method
 from recon.trainer import Trainer
 
@@ -29,9 +28,7 @@ from recon.trainer import Trainer
 def make_trainer(scene, n: int, out: str) -> Trainer:
     cfg = recon.resolve_config("d3dgs", overrides={"train.init.n_points_object": n, "train.init.n_points_room": n})
     trainer = Trainer(get_method("d3dgs")(SceneDataset(scene), cfg), out, progress=False)
-    trainer.model = trainer._new_model()
-    trainer.optimizer = trainer._optimizer()
-    trainer.stats = DensifyStats(len(trainer.model))
+    trainer.setup()
     return trainer
 
 

@@ -96,8 +96,22 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
     raise TypeError(f"{path}: unsupported config field type {tp!r}")
 
 
-def from_dict(cls: type[T], data: Mapping[str, Any], path: str = "") -> T:
-    """Build dataclass `cls` from a mapping; unknown keys and bad values raise `ConfigError`."""
+def _field_default(field: dataclasses.Field) -> Any:
+    if field.default is not dataclasses.MISSING:
+        return field.default
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    return dataclasses.MISSING
+
+
+def from_dict(cls: type[T], data: Mapping[str, Any], path: str = "", base: Any = None) -> T:
+    """Build dataclass `cls` from a mapping; unknown keys and bad values raise `ConfigError`.
+
+    Keys the mapping leaves out take their values from `base` (an instance of cls) when given, else
+    from the field defaults. A nested dataclass given as a partial mapping is filled from the
+    enclosing field's default instance, so `train: {iterations: 10}` keeps what a method's own
+    default TrainConfig sets, not only what TrainConfig's class defaults say.
+    """
     if not isinstance(data, Mapping):
         raise ConfigError(f"{path or '<top>'}: expected a mapping, got {_describe(data)}")
     hints = get_type_hints(cls)
@@ -108,10 +122,17 @@ def from_dict(cls: type[T], data: Mapping[str, Any], path: str = "") -> T:
             raise ConfigError(f"{prefix}{key}: unknown key (known keys: {', '.join(sorted(fields))})")
     kwargs = {}
     for name, field in fields.items():
+        default = getattr(base, name) if base is not None else _field_default(field)
         if name in data:
-            kwargs[name] = _convert(hints[name], data[name], f"{prefix}{name}")
-        elif field.default is dataclasses.MISSING and field.default_factory is dataclasses.MISSING:
+            value, tp = data[name], hints[name]
+            if dataclasses.is_dataclass(tp) and isinstance(value, Mapping) and isinstance(default, tp):
+                kwargs[name] = from_dict(tp, value, f"{prefix}{name}", base=default)
+            else:
+                kwargs[name] = _convert(tp, value, f"{prefix}{name}")
+        elif default is dataclasses.MISSING:
             raise ConfigError(f"{prefix}{name}: required key is missing")
+        elif base is not None:
+            kwargs[name] = default
     try:
         return cls(**kwargs)
     except ConfigError as exc:

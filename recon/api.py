@@ -30,17 +30,6 @@ def set_dotted(data: dict, key: str, value: Any) -> None:
     node[parts[-1]] = value
 
 
-def merge(base: dict, update: Mapping) -> dict:
-    """base updated recursively with `update` (mappings merged key by key, other values replaced)."""
-    out = dict(base)
-    for key, value in update.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
-            out[key] = merge(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
 def parse_set(items: list[str]) -> dict[str, Any]:
     """`--set key=value` items -> {dotted key: YAML-parsed value}."""
     out = {}
@@ -73,9 +62,6 @@ def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any]
         data = to_dict(config)
     else:
         raise TypeError(f"config must be None, a YAML path, a mapping or a {cls.__name__}, got {type(config).__name__}")
-    # on top of the class's own defaults, so nested defaults that differ from the nested class's
-    # (E-4DGS's train.densify.opacity_reset = false) survive a partial `train:` mapping
-    data = merge(to_dict(cls()), data)
     for key, value in (overrides or {}).items():
         set_dotted(data, key, value)
     try:

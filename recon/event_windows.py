@@ -75,8 +75,8 @@ class EventSource:
 class WindowSampler:
     """Random windows over several cameras' event files (seeded through the caller's generator)."""
 
-    def __init__(self, paths: list[Path], n_range: tuple[int, int] | None, n_fixed: int):
-        self.sources = [EventSource(p) for p in paths]
+    def __init__(self, sources: list[EventSource], n_range: tuple[int, int] | None, n_fixed: int):
+        self.sources = sources
         self.n_range = n_range
         self.n_fixed = n_fixed
 

@@ -17,7 +17,7 @@ import math
 import numpy as np
 import torch
 
-REC709 = (0.2126, 0.7152, 0.0722)
+from simulator.pixel import REC709_LUMA
 
 
 def count_map(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -52,11 +52,17 @@ def srgb_to_linear_t(v: torch.Tensor) -> torch.Tensor:
     return torch.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
+def linear_to_srgb_t(v: torch.Tensor) -> torch.Tensor:
+    """Differentiable sRGB encoding of linear light (not clipped above 1)."""
+    v = v.clamp_min(0.0)
+    return torch.where(v <= 0.0031308, 12.92 * v, 1.055 * v.clamp_min(0.0031308) ** (1 / 2.4) - 0.055)
+
+
 def luminance_t(linear: torch.Tensor) -> torch.Tensor:
     """[H, W, C] linear -> [H, W] (C = 1: itself; C = 3: Rec.709 luma)."""
     if linear.shape[-1] == 1:
         return linear[..., 0]
-    w = torch.tensor(REC709, dtype=linear.dtype, device=linear.device)
+    w = torch.tensor(REC709_LUMA, dtype=linear.dtype, device=linear.device)
     return linear @ w
 
 

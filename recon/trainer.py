@@ -32,8 +32,9 @@ from recon.deform import DeformationField
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
 from recon.evaluate import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
-from recon.model import DynamicGaussians, ModelMeta
-from simulator.pixel import linear_to_srgb, rec709_luma, srgb_to_linear
+from recon.model import DynamicGaussians, ModelMeta, load
+from recon.views import gray_from_srgb, load_frame, record_camera
+from simulator.pixel import linear_to_srgb, rec709_luma
 
 CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
 
@@ -68,9 +69,18 @@ class Method:
         """Gaussians to prune at this iteration (bool [N]) or None (called every iteration, after backward)."""
         return None
 
+    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        """What is applied to a prediction before it is scored (identity; E-4DGS: colour correction)."""
+        return pred
+
     def eval_pairs(self, model: DynamicGaussians, records) -> list[tuple[np.ndarray, np.ndarray]]:
         """(prediction, ground truth) images [H, W, C] in [0, 1] for held-out records."""
-        raise NotImplementedError
+        pairs = []
+        for rec in records:
+            gt = load_frame(self.dataset, rec, self.channels())
+            pred = model.render(record_camera(self.dataset, rec), rec.time).numpy()
+            pairs.append((self.correct(pred, gt), gt))
+        return pairs
 
     def state_dict(self) -> dict:
         return {}
@@ -148,7 +158,7 @@ class Trainer:
         deform = DeformationField()
         bg = list(self.tcfg.background) if self.tcfg.background is not None else scene_background(self.dataset, channels)
         if channels == 1 and len(bg) == 3:
-            bg = [float(linear_to_srgb(rec709_luma(srgb_to_linear(np.asarray(bg)))))]
+            bg = [float(gray_from_srgb(np.asarray(bg)))]
         meta = ModelMeta(method=self.method.name, channels=channels, sh_degree=self.tcfg.sh_degree, background=bg,
                          extent=self.extent, duration_us=self.dataset.duration_us,
                          deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.config.name,
@@ -156,6 +166,12 @@ class Trainer:
         model = DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
         self.method.setup_model(model)
         return model
+
+    def setup(self) -> None:
+        """A fresh model, its optimizer and densification statistics (iteration 0)."""
+        self.model = self._new_model()
+        self.optimizer = self._optimizer()
+        self.stats = DensifyStats(len(self.model))
 
     def _optimizer(self) -> torch.optim.Adam:
         g, lr = self.model.gaussians, self.tcfg.lr
@@ -253,18 +269,13 @@ class Trainer:
         final = self.out / "model.pt"
         self._check_out_dir()
         if final.exists():
-            from recon.model import load
-
             return load(final)
         if not self._load_checkpoint():
-            self.model = self._new_model()
-            self.optimizer = self._optimizer()
-            self.stats = DensifyStats(len(self.model))
+            self.setup()
         cfg, sched = self.tcfg, self.sched
         snaps = self._snapshot_iterations()
         bar = tqdm(total=cfg.iterations, initial=self.iteration, disable=not self.progress,
                    desc=f"{self.method.name} {self.dataset.config.name}", dynamic_ncols=True)
-        g = self.model.gaussians
         while self.iteration < cfg.iterations:
             it = self.iteration + 1
             t0 = time.perf_counter()

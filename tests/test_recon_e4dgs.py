@@ -11,6 +11,7 @@ from datagen.dataset import SceneDataset
 from recon.evaluate import evaluate_psnr
 from recon.methods.e4dgs import E4DGS, E4DGSRGB
 from recon.trainer import Trainer
+from recon.views import dataset_camera
 
 SMALL = {"train.init.n_points_object": 2000, "train.deform_bf16": True, "train.lr.feature": 0.01,
          "train.snapshots": [1.0], "train.checkpoint_every": 5000}
@@ -24,11 +25,7 @@ OVER_UNTRAINED_DB = 1.0
 def trainer_for(scene, tmp_path, method="e4dgs", **overrides):
     cfg = recon.resolve_config(method, overrides={**SMALL, **overrides})
     tr = Trainer(recon.get_method(method)(SceneDataset(scene), cfg), tmp_path / method, progress=False)
-    tr.model = tr._new_model()
-    tr.optimizer = tr._optimizer()
-    from recon.densify import DensifyStats
-
-    tr.stats = DensifyStats(len(tr.model))
+    tr.setup()
     return tr
 
 
@@ -108,7 +105,7 @@ def test_iip_switch_prunes_by_importance_only_when_on(motion_scene, tmp_path):
     assert mask.dtype == torch.bool and mask.shape == (len(on.model),)
     assert torch.equal(mask, w < 0.015) and 0 < int(mask.sum()) < len(on.model)
     # importance is the max over cameras and times of the rasterizer's max_weight
-    out = on.model.render_output(on.method._camera_at(0, 0), 0.0)
+    out = on.model.render_output(dataset_camera(on.dataset, 0, 0), 0.0)
     assert torch.all(w >= out.max_weight - 1e-7)
 
 

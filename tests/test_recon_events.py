@@ -123,15 +123,15 @@ def test_windows_hold_the_drawn_count_and_match_the_file(motion_scene):
 
 def test_window_counts_follow_the_event_rate_or_the_pixel_count(motion_scene):
     ds = SceneDataset(motion_scene)
-    paths = [ds.event_file(k) for k in range(ds.n_cameras)]
-    smallest = min(EventSource(p).n for p in paths)
+    counts = [EventSource(ds.event_file(k)).n for k in range(ds.n_cameras)]
+    smallest = min(counts)
     cfg = recon.resolve_config("e4dgs").events
-    assert E4DGS.window_counts(ds, cfg, paths) == (round(0.05 * smallest), round(0.2 * smallest))
+    assert E4DGS.window_counts(ds, cfg, counts) == (round(0.05 * smallest), round(0.2 * smallest))
     cfg = recon.resolve_config("e4dgs", overrides={"events.window_scale": "pixels"}).events
     ratio = 64 * 48 / PAPER_PIXELS
-    assert E4DGS.window_counts(ds, cfg, paths) == (round(5000 * ratio), round(10000 * ratio))
+    assert E4DGS.window_counts(ds, cfg, counts) == (round(5000 * ratio), round(10000 * ratio))
     cfg = recon.resolve_config("e4dgs", overrides={"events.window_fraction": [0.9, 1.0]}).events
-    assert E4DGS.window_counts(ds, cfg, paths) == (int(0.5 * smallest),) * 2     # capped
+    assert E4DGS.window_counts(ds, cfg, counts) == (int(0.5 * smallest),) * 2     # capped
 
 
 def test_color_correction_recovers_gain_and_offset_and_handles_constants(rng):

@@ -1,7 +1,6 @@
 """D3DGS end to end on the tiny moving scene: it overfits, beats a static 3DGS on held-out times,
 saves / loads / resumes exactly, and handles the hard cases with clear errors or defined output."""
 import json
-import math
 import subprocess
 import sys
 from pathlib import Path
@@ -14,9 +13,10 @@ import recon
 from datagen.dataset import SceneDataset
 from e4dgs.config import ConfigError
 from recon.evaluate import evaluate_psnr
-from recon.methods.d3dgs import D3DGS, record_camera
+from recon.methods.d3dgs import D3DGS
 from recon.render import camera_from_pose
 from recon.trainer import TrainingError
+from recon.views import record_camera
 
 ROOT = Path(__file__).resolve().parent.parent
 

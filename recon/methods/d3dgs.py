@@ -9,39 +9,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
 from datagen.dataset import DatasetError, FrameRecord, SceneDataset
 from recon.config import D3DGSConfig
 from recon.losses import photometric_loss
 from recon.methods import register
-from recon.model import DynamicGaussians
 from recon.raster import Camera
-from recon.render import camera_from_pose
 from recon.trainer import Method
-from simulator.pixel import linear_to_srgb, rec709_luma, srgb_to_linear
-
-
-def gray_from_srgb(rgb: np.ndarray) -> np.ndarray:
-    """[H, W, 3] sRGB in [0, 1] -> [H, W] sRGB-encoded luma of the linear light."""
-    return linear_to_srgb(rec709_luma(srgb_to_linear(rgb))).astype(np.float32)
-
-
-def load_frame(dataset: SceneDataset, rec: FrameRecord, channels: int) -> np.ndarray:
-    """Frame [H, W, channels] in [0, 1] (sRGB-encoded as stored)."""
-    if channels == 3:
-        img = dataset.load_image(rec.path)
-        if img.ndim != 3:
-            raise DatasetError(f"{rec.path}: expected an RGB image")
-        return img
-    img = dataset.load_image(rec.gray_path) if rec.gray_path is not None else dataset.load_image(rec.path)
-    return (gray_from_srgb(img) if img.ndim == 3 else img)[..., None]
-
-
-def record_camera(dataset: SceneDataset, rec: FrameRecord) -> Camera:
-    intr = dataset.intrinsics
-    return camera_from_pose(intr.K, dataset.pose(rec.camera, rec.t_us), intr.width, intr.height)
+from recon.views import load_frame, record_camera
 
 
 @dataclass
@@ -84,10 +60,3 @@ class D3DGS(Method):
             out.means2d.retain_grad()
         loss = photometric_loss(out.image, view.image, self.cfg.lambda_dssim)
         return loss, [(out, view.camera)]
-
-    def eval_pairs(self, model: DynamicGaussians, records):
-        pairs = []
-        for rec in records:
-            pred = model.render(record_camera(self.dataset, rec), rec.time).numpy()
-            pairs.append((pred, load_frame(self.dataset, rec, self.channels())))
-        return pairs

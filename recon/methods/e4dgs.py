@@ -24,25 +24,19 @@ import numpy as np
 import torch
 from torch import nn
 
-from datagen.dataset import DatasetError, SceneDataset
+from datagen.dataset import SceneDataset
 from recon import events as ev
 from recon.color import correct_colors
 from recon.config import E4DGSConfig
-from recon.event_windows import WindowSampler
+from recon.event_windows import EventSource, WindowSampler
 from recon.losses import photometric_loss
 from recon.methods import register
-from recon.methods.d3dgs import load_frame, record_camera
 from recon.model import DynamicGaussians
 from recon.raster import Camera
-from recon.render import camera_from_pose
 from recon.trainer import Method
+from recon.views import dataset_camera, load_frame
 
 PAPER_PIXELS = 346 * 260
-
-
-def linear_to_srgb_t(v: torch.Tensor) -> torch.Tensor:
-    v = v.clamp_min(0.0)
-    return torch.where(v <= 0.0031308, 12.92 * v, 1.055 * v.clamp_min(0.0031308) ** (1 / 2.4) - 0.055)
 
 
 @dataclass
@@ -61,13 +55,10 @@ class E4DGS(Method):
     def __init__(self, dataset: SceneDataset, cfg: E4DGSConfig):
         super().__init__(dataset, cfg)
         e = cfg.events
-        paths = [dataset.event_file(k) for k in range(dataset.n_cameras)]
-        for p in paths:
-            if not p.exists():
-                raise DatasetError(f"{p}: missing event file")
-        self.n_range = self.window_counts(dataset, e, paths)
+        sources = [EventSource(dataset.event_file(k)) for k in range(dataset.n_cameras)]
+        self.n_range = self.window_counts(dataset, e, [s.n for s in sources])
         n_fixed = int(round(sum(self.n_range) / 2))
-        self.sampler = WindowSampler(paths, self.n_range if e.ess else None, n_fixed)
+        self.sampler = WindowSampler(sources, self.n_range if e.ess else None, n_fixed)
         src = self.sampler.sources[0]
         self.c_pos, self.c_neg = src.thresholds()
         self.c_ref = 0.5 * (self.c_pos + self.c_neg)
@@ -79,12 +70,11 @@ class E4DGS(Method):
         self.blur_views = self._blur_views() if self.uses_rgb else []
 
     @staticmethod
-    def window_counts(dataset: SceneDataset, e, paths) -> tuple[int, int]:
-        """[N_min, N_max] for this dataset (see EventConfig): window_fraction of the smallest camera's
-        stream, or the paper's range scaled by the pixel count; capped at max_window_fraction."""
-        from simulator.h5io import read_info
-
-        smallest = min(read_info(p)["n_events"] for p in paths)
+    def window_counts(dataset: SceneDataset, e, n_events: list[int]) -> tuple[int, int]:
+        """[N_min, N_max] for this dataset (see EventConfig) from each camera's event count:
+        window_fraction of the smallest stream, or the paper's range scaled by the pixel count;
+        capped at max_window_fraction."""
+        smallest = min(n_events)
         if e.window_scale == "rate":
             lo, hi = (f * smallest for f in e.window_fraction)
         else:
@@ -118,21 +108,16 @@ class E4DGS(Method):
     # -- data -----------------------------------------------------------------------------------
     def _blur_views(self) -> list[BlurView]:
         ds, cfg = self.dataset, self.cfg
-        intr = ds.intrinsics
         views = []
         for rec in ds.blurred_frames(cfg.rgb_frames):
             if cfg.rgb_render == "mean" and rec.exposure_us is not None:
                 t_us = np.linspace(rec.exposure_us[0], rec.exposure_us[1], cfg.rgb_samples)
             else:
                 t_us = np.array([rec.t_us])
-            cams = [camera_from_pose(intr.K, ds.pose(rec.camera, t), intr.width, intr.height) for t in t_us]
+            cams = [dataset_camera(ds, rec.camera, t) for t in t_us]
             views.append(BlurView(cams, [float(t) / ds.duration_us for t in t_us],
                                   torch.from_numpy(load_frame(ds, rec, 3))))
         return views
-
-    def _camera_at(self, k: int, t_us: int) -> Camera:
-        intr = self.dataset.intrinsics
-        return camera_from_pose(intr.K, self.dataset.pose(k, t_us), intr.width, intr.height)
 
     def log_intensity(self, image: torch.Tensor) -> torch.Tensor:
         """Rendered sRGB image [H, W, C] -> L_hat [H, W] through the simulator's response."""
@@ -144,7 +129,7 @@ class E4DGS(Method):
     def event_loss(self, trainer, window):
         ds, e = self.dataset, self.cfg.events
         t_s, t_e = window.t_start_us / ds.duration_us, window.t_end_us / ds.duration_us
-        cam_s, cam_e = self._camera_at(window.camera, window.t_start_us), self._camera_at(window.camera, window.t_end_us)
+        cam_s, cam_e = dataset_camera(ds, window.camera, window.t_start_us), dataset_camera(ds, window.camera, window.t_end_us)
         out_s = trainer.model.render_output(cam_s, min(max(t_s, 0.0), 1.0), trainer.tcfg.backend)
         out_e = trainer.model.render_output(cam_e, min(max(t_e, 0.0), 1.0), trainer.tcfg.backend)
         intr = ds.intrinsics
@@ -162,7 +147,7 @@ class E4DGS(Method):
         if len(outs) == 1:
             pred = outs[0].image
         else:  # blur = mean of linear light over the exposure
-            pred = linear_to_srgb_t(torch.stack([ev.srgb_to_linear_t(o.image) for o in outs]).mean(0))
+            pred = ev.linear_to_srgb_t(torch.stack([ev.srgb_to_linear_t(o.image) for o in outs]).mean(0))
         loss = photometric_loss(pred, view.image, self.cfg.lambda_dssim)
         return loss, list(zip(outs, view.cameras))
 
@@ -184,7 +169,7 @@ class E4DGS(Method):
         ds = self.dataset
         for k in range(ds.n_cameras):
             for t in np.linspace(0.0, 1.0, self.cfg.events.iip_times):
-                out = model.render_output(self._camera_at(k, int(round(t * ds.duration_us))), float(t))
+                out = model.render_output(dataset_camera(self.dataset, k, int(round(t * ds.duration_us))), float(t))
                 w = torch.maximum(w, out.max_weight.detach())
         return w
 
@@ -196,13 +181,8 @@ class E4DGS(Method):
         return self.importance(trainer.model) < e.iip_threshold
 
     # -- evaluation -----------------------------------------------------------------------------
-    def eval_pairs(self, model: DynamicGaussians, records):
-        pairs = []
-        for rec in records:
-            pred = model.render(record_camera(self.dataset, rec), rec.time).numpy()
-            gt = load_frame(self.dataset, rec, self.channels())
-            pairs.append((correct_colors(pred, gt)[0], gt))
-        return pairs
+    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        return correct_colors(pred, gt)[0]
 
 
 @register

@@ -1,0 +1,36 @@
+"""A generated scene's frames as training / evaluation views: cameras posed along the recorded
+trajectories, and images in the channels a model predicts (sRGB-encoded, as the dataset stores them)."""
+from __future__ import annotations
+
+import numpy as np
+
+from datagen.dataset import DatasetError, FrameRecord, SceneDataset
+from recon.raster import Camera
+from recon.render import camera_from_pose
+from simulator.pixel import linear_to_srgb, rec709_luma, srgb_to_linear
+
+
+def gray_from_srgb(rgb: np.ndarray) -> np.ndarray:
+    """[..., 3] sRGB in [0, 1] -> [...] sRGB-encoded luma of the linear light (how gray/ frames are made)."""
+    return linear_to_srgb(rec709_luma(srgb_to_linear(rgb))).astype(np.float32)
+
+
+def dataset_camera(dataset: SceneDataset, camera: int, t_us) -> Camera:
+    """Raster camera of dataset camera `camera` at time t_us (interpolated along its trajectory)."""
+    intr = dataset.intrinsics
+    return camera_from_pose(intr.K, dataset.pose(camera, t_us), intr.width, intr.height)
+
+
+def record_camera(dataset: SceneDataset, rec: FrameRecord) -> Camera:
+    return dataset_camera(dataset, rec.camera, rec.t_us)
+
+
+def load_frame(dataset: SceneDataset, rec: FrameRecord, channels: int) -> np.ndarray:
+    """Frame [H, W, channels] in [0, 1] (sRGB-encoded as stored)."""
+    if channels == 3:
+        img = dataset.load_image(rec.path)
+        if img.ndim != 3:
+            raise DatasetError(f"{rec.path}: expected an RGB image")
+        return img
+    img = dataset.load_image(rec.gray_path) if rec.gray_path is not None else dataset.load_image(rec.path)
+    return (gray_from_srgb(img) if img.ndim == 3 else img)[..., None]
