@@ -186,3 +186,54 @@ def replace_checked(obj: T, **changes: Any) -> T:
             raise ConfigError(f"{key}: unknown key (known keys: {', '.join(sorted(data))})")
     data.update(changes)
     return from_dict(type(obj), data)
+
+
+def set_dotted(data: dict, key: str, value: Any) -> None:
+    """data[a][b][c] = value for key 'a.b.c' (creating mappings on the way)."""
+    parts = key.split(".")
+    node = data
+    for part in parts[:-1]:
+        nxt = node.setdefault(part, {})
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"{key}: {part} is not a mapping")
+        node = nxt
+    node[parts[-1]] = value
+
+
+def parse_set(items: list[str]) -> dict[str, Any]:
+    """`--set key=value` items -> {dotted key: YAML-parsed value}."""
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--set {item!r}: expected key=value")
+        key, value = item.split("=", 1)
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
+def build_config(cls: type[T], config: Any = None, overrides: Mapping[str, Any] | None = None) -> T:
+    """A typed config from None (defaults), a YAML path, a mapping or an instance, with
+    dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key (and file)."""
+    source = "--set" if config is None else "<config>"
+    if config is None:
+        data: dict = {}
+    elif isinstance(config, (str, Path)):
+        source = str(config)
+        try:
+            data = yaml.safe_load(Path(config).read_text()) or {}
+        except OSError as exc:
+            raise ConfigError(f"{config}: cannot read config file ({exc.strerror})") from None
+        if not isinstance(data, dict):
+            raise ConfigError(f"{config}: expected a mapping at the top level")
+    elif isinstance(config, Mapping):
+        data = dict(config)
+    elif isinstance(config, cls):
+        data = to_dict(config)
+    else:
+        raise TypeError(f"config must be None, a YAML path, a mapping or a {cls.__name__}, got {type(config).__name__}")
+    for key, value in (overrides or {}).items():
+        set_dotted(data, key, value)
+    try:
+        return from_dict(cls, data)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None

@@ -9,65 +9,17 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-import yaml
-
 from datagen.dataset import SceneDataset
-from e4dgs.config import ConfigError, from_dict, to_dict
+from e4dgs.config import build_config, parse_set, set_dotted  # noqa: F401  (parse_set, set_dotted re-exported)
 from recon.methods import get_method
 from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)
 from recon.trainer import Trainer
 
 
-def set_dotted(data: dict, key: str, value: Any) -> None:
-    """data[a][b][c] = value for key 'a.b.c' (creating mappings on the way)."""
-    parts = key.split(".")
-    node = data
-    for part in parts[:-1]:
-        nxt = node.setdefault(part, {})
-        if not isinstance(nxt, dict):
-            raise ConfigError(f"{key}: {part} is not a mapping")
-        node = nxt
-    node[parts[-1]] = value
-
-
-def parse_set(items: list[str]) -> dict[str, Any]:
-    """`--set key=value` items -> {dotted key: YAML-parsed value}."""
-    out = {}
-    for item in items:
-        if "=" not in item:
-            raise ConfigError(f"--set {item!r}: expected key=value")
-        key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
-    return out
-
-
 def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any] | None = None):
     """A method's typed config from None (defaults), a YAML path, a mapping or an instance, with
     dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key (and file)."""
-    cls = get_method(method).config_cls
-    source = "--set" if config is None else "<config>"
-    if config is None:
-        data: dict = {}
-    elif isinstance(config, (str, Path)):
-        source = str(config)
-        try:
-            data = yaml.safe_load(Path(config).read_text()) or {}
-        except OSError as exc:
-            raise ConfigError(f"{config}: cannot read config file ({exc.strerror})") from None
-        if not isinstance(data, dict):
-            raise ConfigError(f"{config}: expected a mapping at the top level")
-    elif isinstance(config, Mapping):
-        data = dict(config)
-    elif isinstance(config, cls):
-        data = to_dict(config)
-    else:
-        raise TypeError(f"config must be None, a YAML path, a mapping or a {cls.__name__}, got {type(config).__name__}")
-    for key, value in (overrides or {}).items():
-        set_dotted(data, key, value)
-    try:
-        return from_dict(cls, data)
-    except ConfigError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+    return build_config(get_method(method).config_cls, config, overrides)
 
 
 def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_dir: str | Path | None = None,

@@ -225,3 +225,16 @@ class E4DGSConfig:
 
     def __post_init__(self):
         _positive(self, "rgb_samples")
+
+
+@dataclass(frozen=True)
+class E2VIDD3DGSConfig:
+    """E2VID + D3DGS: each camera's events -> intensity frames at its training frames' timestamps
+    (a recurrent network run over the whole stream), then D3DGS on those frames (grayscale).
+    `weights: ""` is the network this project trained (e2vid/weights/); any official-layout file
+    (e.g. E2VID_lightweight.pth.tar) works too. events_per_window 0: one window per frame interval."""
+    weights: str = ""
+    events_per_window: int = 0
+    lambda_dssim: float = 0.2
+    color_correct: bool = True       # score after the same log-intensity gain/offset fit as E-4DGS
+    train: TrainConfig = field(default_factory=TrainConfig)

@@ -37,14 +37,16 @@ class EventSimulator:
     """Per-pixel state of one DVS sensor; see module docstring for the model."""
 
     def __init__(self, config: SimulatorConfig, width: int, height: int, seed: int = 0,
-                 backend: str = "fast"):
+                 backend: str = "fast", threads: int | None = None):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")
         if width <= 0 or height <= 0:
             raise ValueError(f"sensor size must be positive, got {width}x{height}")
         self.config, self.width, self.height, self.seed = config, int(width), int(height), int(seed)
         self._emit = BACKENDS[backend]
-        self._emit_kwargs = {"workspace": Workspace()} if backend == "fast" else {}
+        # threads: work chunks of the fast kernel (default: numba's thread count; 1 for small sensors,
+        # where the parallel kernel's overhead dominates)
+        self._emit_kwargs = {"workspace": Workspace(threads)} if backend == "fast" else {}
         P = self.n_pixels = self.width * self.height
         # Independent streams: fixed-pattern parameters, then temporal noise.
         fixed_rng, self._noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))

@@ -1,0 +1,60 @@
+"""E2VID + D3DGS, the paper's weakest baseline: reconstruct each camera's intensity video from its
+events with a recurrent network (E2VID / FireNet, `e2vid/`), then train D3DGS on those frames.
+
+The network runs once per camera over the whole event stream, with outputs at the sorted timestamps
+of that camera's training frames (the dataset's RGB timestamps); frames are grayscale, so the model
+is too. Like the events-only E-4DGS, its intensity scale is arbitrary, so by default predictions
+are scored after the same colour correction (`color_correct`).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from datagen.dataset import SceneDataset
+from e2vid.networks import Reconstructor
+from e2vid.official import load_checkpoint
+from e2vid.reconstruct import reconstruct_frames
+from e2vid.weights import default_weights_path
+from recon.color import correct_colors
+from recon.config import E2VIDD3DGSConfig
+from recon.methods import register
+from recon.methods.d3dgs import D3DGS, TrainView
+from recon.views import record_camera
+from simulator.h5io import read_events
+
+
+def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, weights: str = "",
+                       events_per_window: int = 0) -> np.ndarray:
+    """Frames [K, H, W] in [0, 1] of camera `camera` at the sorted times t_us."""
+    net, _ = load_checkpoint(weights or default_weights_path())
+    stream = read_events(dataset.event_file(camera))
+    return reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height,
+                              np.asarray(t_us, np.int64), events_per_window or None, net.cfg.num_bins)
+
+
+@register
+class E2VIDD3DGS(D3DGS):
+    name = "e2vid_d3dgs"
+    config_cls = E2VIDD3DGSConfig
+
+    def channels(self) -> int:
+        return 1
+
+    def training_records(self):
+        return self.dataset.frames("train")
+
+    def training_views(self) -> list[TrainView]:
+        records = self.training_records()
+        views = []
+        with torch.inference_mode():
+            for cam in sorted({r.camera for r in records}):
+                recs = sorted((r for r in records if r.camera == cam), key=lambda r: r.t_us)
+                frames = reconstruct_camera(self.dataset, cam, np.array([r.t_us for r in recs]),
+                                            self.cfg.weights, self.cfg.events_per_window)
+                views += [TrainView(record_camera(self.dataset, r), r.time, torch.from_numpy(f[..., None].copy()))
+                          for r, f in zip(recs, frames)]
+        return views
+
+    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        return correct_colors(pred, gt)[0] if self.cfg.color_correct else pred
