@@ -77,18 +77,18 @@ def sequence_loss(net, batch, cfg: E2VIDTrainConfig, lpips_fn) -> tuple[torch.Te
         target = batch.targets[t]
         l1 = (pred - target).abs().mean()
         loss = cfg.lambda_l1 * l1
-        parts["l1"] += float(l1) / T
+        parts["l1"] += l1.item() / T
         if lpips_fn is not None and cfg.lambda_lpips > 0:
             lp = lpips_fn(pred, target).mean()
             loss = loss + cfg.lambda_lpips * lp
-            parts["lpips"] += float(lp) / T
+            parts["lpips"] += lp.item() / T
         if t > 0 and cfg.lambda_tc > 0:
             w_pred, valid = warp(prev, batch.flow[t])
             w_gt, _ = warp(batch.targets[t - 1], batch.flow[t])
             mask = valid * torch.exp(-cfg.tc_alpha * (target - w_gt) ** 2)
             tc = (mask * (pred - w_pred).abs()).mean()
             loss = loss + cfg.lambda_tc * tc
-            parts["tc"] += float(tc) / T
+            parts["tc"] += tc.item() / T
         total = total + loss / T
         prev = pred
     return total, parts
@@ -112,7 +112,7 @@ class E2VIDTrainer:
 
     def _lr(self, it: int) -> float:
         c = self.cfg
-        return c.lr_final + 0.5 * (c.lr - c.lr_final) * (1 + np.cos(np.pi * min(it / max(c.iterations, 1), 1.0)))
+        return float(c.lr_final + 0.5 * (c.lr - c.lr_final) * (1 + np.cos(np.pi * min(it / max(c.iterations, 1), 1.0))))
 
     def _save(self) -> None:
         with atomic_output(self.ckpt_path) as tmp:

@@ -6,7 +6,9 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from benchmark.cli import add_bench_parser
     from datagen.cli import add_dataset_parser
+    from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
     from simulator.cli import add_simulate_parser, add_view_parser
 
@@ -17,6 +19,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_dataset_parser(sub)
     add_train_parser(sub)
     add_render_parser(sub)
+    add_train_e2vid_parser(sub)
+    add_e2vid_parser(sub)
+    add_bench_parser(sub)
     return parser
 
 

@@ -51,6 +51,13 @@ class Method:
     def __init__(self, dataset: SceneDataset, cfg: Any):
         self.dataset, self.cfg = dataset, cfg
 
+    @classmethod
+    def for_evaluation(cls, dataset: SceneDataset, cfg: Any) -> "Method":
+        """An instance for `eval_pairs` / `channels` only: no training data loaded or reconstructed."""
+        obj = cls.__new__(cls)
+        Method.__init__(obj, dataset, cfg)
+        return obj
+
     def channels(self) -> int:
         raise NotImplementedError
 

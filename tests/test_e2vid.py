@@ -248,3 +248,51 @@ def test_flow_grid_maps_pixels_to_their_previous_position():
     yy, xx = np.mgrid[0:H, 0:W]
     np.testing.assert_allclose(px, xx + 2, atol=1e-5)
     np.testing.assert_allclose(py, yy - 1, atol=1e-5)
+
+
+# ---------------------------------------------------------------- training
+
+def _tiny_train_cfg(**kw):
+    from e2vid.train import E2VIDTrainConfig
+    return E2VIDTrainConfig(iterations=6, batch_size=2, checkpoint_every=2, lpips_net="alex", threads=1,
+                            synth=SynthConfig(height=32, width=32, n_steps=3, substeps=4), **kw)
+
+
+def test_train_e2vid_resumes_to_the_same_weights(tmp_path, monkeypatch):
+    from e2vid import train as tr
+
+    full = tr.E2VIDTrainer(_tiny_train_cfg(), tmp_path / "full", progress=False)
+    full.run()
+
+    calls = {"n": 0}
+    real = tr.make_batch
+
+    def dying(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 4:          # killed during iteration 4: the checkpoint holds iteration 2
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "make_batch", dying)
+    with pytest.raises(KeyboardInterrupt):
+        tr.E2VIDTrainer(_tiny_train_cfg(), tmp_path / "killed", progress=False).run()
+    monkeypatch.setattr(tr, "make_batch", real)
+    resumed = tr.E2VIDTrainer(_tiny_train_cfg(), tmp_path / "killed", progress=False)
+    resumed.run()
+    assert [r["iteration"] for r in resumed.log] == list(range(1, 7))
+    for k, v in full.net.state_dict().items():
+        torch.testing.assert_close(resumed.net.state_dict()[k], v, rtol=1e-5, atol=1e-6)
+    # another config in the same folder is refused, not silently mixed
+    with pytest.raises(ValueError, match="different config"):
+        tr.E2VIDTrainer(_tiny_train_cfg(lr=5e-4), tmp_path / "killed", progress=False).run()
+
+
+def test_training_loss_terms_are_finite_and_temporal_term_sees_motion():
+    from e2vid.train import E2VIDTrainConfig, sequence_loss
+    net = build_network(FIRENET)
+    seq = make_sequence(3, SynthConfig(height=32, width=32, n_steps=3, substeps=4))
+    batch = type(seq)(seq.voxels[:, None], seq.targets[:, None], seq.flow[:, None], seq.n_events[:, None])
+    loss, parts = sequence_loss(net, batch, E2VIDTrainConfig(lambda_lpips=0.0), None)
+    assert torch.isfinite(loss) and parts["l1"] > 0 and parts["tc"] >= 0
+    loss.backward()
+    assert all(torch.isfinite(p.grad).all() for p in net.parameters() if p.grad is not None)

@@ -1,0 +1,136 @@
+"""Benchmark presets: which scenes, which method cells, and the extra studies (blur, ablation).
+
+A cell is a method with a config file and dotted overrides; the same method appears in several
+cells (D3DGS on sharp and on blurred frames; E-4DGS with a component switched off). Presets are
+YAML files in configs/bench/ (`--preset quick` -> configs/bench/quick.yaml) loaded strictly.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from e4dgs.config import ConfigError, build_config, to_dict
+
+REPO = Path(__file__).resolve().parent.parent
+PRESET_DIR = REPO / "configs" / "bench"
+
+# the leaderboard's rows, in the paper's Table 1 order
+MAIN_CELLS = ("d3dgs_sharp", "d3dgs_blur", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+LABELS = {"d3dgs_sharp": "D3DGS (sharp RGB)", "d3dgs_blur": "D3DGS (blurred RGB)", "e2vid_d3dgs": "E2VID + D3DGS",
+          "e4dgs": "E-4DGS (events)", "e4dgs_rgb": "E-4DGS (events + blurred RGB)"}
+
+
+@dataclass(frozen=True)
+class CellSpec:
+    method: str
+    config: str = ""                                   # recon config YAML, relative to the repository root
+    overrides: dict[str, Any] = field(default_factory=dict)   # dotted keys, as `--set`
+
+
+@dataclass(frozen=True)
+class BlurStudy:
+    scene: str = ""                       # "" : no blur study
+    levels: tuple[str, ...] = ("mild", "medium", "strong")
+    cells: tuple[str, ...] = ("d3dgs_blur", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+    level_key: dict[str, str] = field(default_factory=lambda: {"d3dgs": "frames", "e4dgs_rgb": "rgb_frames"})
+
+
+@dataclass(frozen=True)
+class AblationStudy:
+    scene: str = ""                       # "" : no ablation
+    base: str = "e4dgs"
+    switches: dict[str, dict[str, Any]] = field(default_factory=lambda: {
+        "w/o TV": {"events.lambda_tv": 0.0}, "w/o ESS": {"events.ess": False},
+        "w/o AES": {"events.aes": False}, "w/o IIP": {"events.iip": False}})
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    dataset: str = "quick"               # data/<dataset>, generated with `e4dgs dataset --preset <dataset>`
+    scenes: tuple[str, ...] = ("lego",)
+    cells: dict[str, CellSpec] = field(default_factory=dict)
+    blur: BlurStudy = field(default_factory=BlurStudy)
+    ablation: AblationStudy = field(default_factory=AblationStudy)
+    lpips_net: str = "vgg"
+    snapshot_metrics: tuple[str, ...] = ("psnr", "ssim")    # at 10/25/50 % (the final model gets all)
+    description: str = ""
+
+    def __post_init__(self):
+        unknown = [c for c in MAIN_CELLS if c not in self.cells]
+        if unknown:
+            raise ConfigError(f"cells: missing {', '.join(unknown)} (every preset defines the five main cells)")
+        for c in self.blur.cells:
+            if c not in self.cells:
+                raise ConfigError(f"blur.cells: {c!r} is not a cell")
+        if self.ablation.scene and self.ablation.base not in self.cells:
+            raise ConfigError(f"ablation.base: {self.ablation.base!r} is not a cell")
+
+
+def load_bench(preset: str | Path) -> BenchConfig:
+    path = Path(preset)
+    if not path.suffix:
+        path = PRESET_DIR / f"{preset}.yaml"
+    if not path.exists():
+        known = sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+        raise ConfigError(f"{path}: no such benchmark preset (known: {', '.join(known)})")
+    return build_config(BenchConfig, path)
+
+
+@dataclass(frozen=True)
+class Job:
+    """One training run: a cell (possibly varied for a study) on one scene."""
+    study: str            # main | blur | ablation
+    scene: str
+    cell: str             # the main cell it derives from
+    variant: str          # "" (main), a blur level, or an ablation name
+    method: str
+    config: str
+    overrides: dict[str, Any]
+
+    @property
+    def key(self) -> str:
+        return "/".join(p for p in (self.study, self.scene, self.cell, self.variant) if p)
+
+    @property
+    def run_name(self) -> str:
+        return "_".join(p for p in (self.cell, self.variant.replace("/", "").replace(" ", "_")) if p)
+
+    def config_hash(self) -> str:
+        payload = {"method": self.method, "overrides": self.overrides,
+                   "config": (REPO / self.config).read_text() if self.config else ""}
+        if self.method == "e2vid_d3dgs":      # the network's weights are an input too
+            from e2vid.weights import default_weights_path
+            weights = self.overrides.get("weights") or default_weights_path()
+            payload["weights_sha256"] = hashlib.sha256(Path(weights).read_bytes()).hexdigest()
+        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def jobs(cfg: BenchConfig) -> list[Job]:
+    """Every training run of a preset, main table first; studies reuse main runs where they coincide."""
+    out: list[Job] = []
+    for scene in cfg.scenes:
+        for name in MAIN_CELLS:
+            c = cfg.cells[name]
+            out.append(Job("main", scene, name, "", c.method, c.config, dict(c.overrides)))
+    b = cfg.blur
+    if b.scene:
+        for name in b.cells:
+            c = cfg.cells[name]
+            key = b.level_key.get(c.method)
+            for level in b.levels:
+                if key is None:      # the method never sees RGB frames: blur cannot change it
+                    continue
+                out.append(Job("blur", b.scene, name, level, c.method, c.config, {**c.overrides, key: level}))
+    a = cfg.ablation
+    if a.scene:
+        c = cfg.cells[a.base]
+        for variant, switch in a.switches.items():
+            out.append(Job("ablation", a.scene, a.base, variant, c.method, c.config, {**c.overrides, **switch}))
+    return out
+
+
+def dump(cfg: BenchConfig) -> dict:
+    return to_dict(cfg)

@@ -1,0 +1,151 @@
+"""`e4dgs bench`: train every job of a preset, score the held-out views, append to results.jsonl.
+
+runs/<preset>/
+  results.jsonl            one row per job (study x scene x cell x variant); rewritten atomically
+  <scene>/<method>-<hash>/ the training folder (shared by jobs with the same method and config)
+  bench.json               the preset as run
+
+A job whose row exists with the same config hash is reused; a training folder resumes from its
+checkpoint, so a killed benchmark picks up where it stopped. Each row holds the final model's
+PSNR / SSIM / LPIPS (means of per-image values over the scene's held-out views), snapshot scores
+against training wall-clock seconds, iterations, Gaussian count, package versions, git commit.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from benchmark.config import REPO, BenchConfig, Job, dump, jobs
+from benchmark.metrics.image import score_pairs
+from datagen.dataset import SceneDataset
+from e4dgs.fileio import write_text_atomic
+
+
+def versions() -> dict:
+    import torch
+
+    import e4dgs
+    return {"toolkit": e4dgs.__version__, "python": platform.python_version(), "numpy": np.__version__,
+            "torch": torch.__version__}
+
+
+def git_commit() -> str | None:
+    try:
+        r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, timeout=5)
+        return r.stdout.strip() or None
+    except OSError:
+        return None
+
+
+def read_results(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    rows = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if line.strip():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"{path}:{n}: not a JSON row ({exc.msg})") from None
+    return rows
+
+
+def write_results(path: Path, rows: list[dict]) -> None:
+    write_text_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows))
+
+
+def ensure_dataset(cfg: BenchConfig, data_root: Path, log: Callable[[str], None]) -> None:
+    missing = [s for s in cfg.scenes if not (data_root / s / "manifest.json").exists()]
+    if not missing:
+        return
+    from e4dgs.cli import main as cli_main
+
+    log(f"bench: generating dataset {cfg.dataset} for {', '.join(missing)} -> {data_root}")
+    rc = cli_main(["dataset", "--preset", cfg.dataset, "--scenes", ",".join(missing), "--out", str(data_root),
+                   "--jobs", str(min(2, len(missing)))])
+    if rc != 0:
+        raise RuntimeError(f"dataset generation failed for {', '.join(missing)} (run `e4dgs bench` again to resume)")
+
+
+def evaluate_model(method_obj, model, records, lpips_net: str | None) -> dict:
+    return score_pairs(method_obj.eval_pairs(model, records), lpips_net=lpips_net)
+
+
+def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool) -> dict:
+    from recon.api import fit, resolve_config
+    from recon.methods import get_method
+    from recon.model import load
+
+    scene_dir = data_root / job.scene
+    run_dir = out_root / job.scene / f"{job.method}-{job.config_hash()}"
+    t0 = time.time()
+    model = fit(scene_dir, job.method, str(REPO / job.config) if job.config else None, run_dir, job.overrides,
+                progress=progress)
+    train_elapsed = time.time() - t0
+    dataset = SceneDataset(scene_dir)
+    method_cfg = resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides)
+    scorer = get_method(job.method).for_evaluation(dataset, method_cfg)
+    records = dataset.frames("test")
+    t1 = time.time()
+    final = evaluate_model(scorer, model, records, cfg.lpips_net)
+    log_rows = [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
+    snapshots = []
+    for row in log_rows:
+        if "snapshot" not in row:
+            continue
+        if row["iteration"] == model.meta.iteration:
+            scores = {k: final[k] for k in ("psnr", "ssim", "lpips") if k in final}
+        else:
+            snap = load(run_dir / row["snapshot"])
+            s = evaluate_model(scorer, snap, records, None)
+            scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
+        snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
+    return {
+        "key": job.key, "study": job.study, "scene": job.scene, "cell": job.cell, "variant": job.variant,
+        "method": job.method, "config": job.config, "overrides": job.overrides, "config_hash": job.config_hash(),
+        "run_dir": str(run_dir.relative_to(out_root)),
+        **{k: final[k] for k in ("psnr", "ssim", "lpips")}, "n_test_images": final["n_images"],
+        "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
+        "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),
+        "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
+        "versions": versions(), "git_commit": git_commit(), "lpips_net": cfg.lpips_net,
+    }
+
+
+def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,
+              cells: list[str] | None = None, studies: tuple[str, ...] = ("main", "blur", "ablation"),
+              progress: bool = True, log: Callable[[str], None] = print) -> list[dict]:
+    todo = [j for j in jobs(cfg) if j.study in studies and (not scenes or j.scene in scenes)
+            and (not cells or j.cell in cells)]
+    needed = sorted({j.scene for j in todo})
+    ensure_dataset(BenchConfig(**{**cfg.__dict__, "scenes": tuple(needed)}), data_root, log)
+    out_root.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(out_root / "bench.json", json.dumps({"preset": preset_name, **dump(cfg)}, indent=1))
+    results_path = out_root / "results.jsonl"
+    rows = read_results(results_path)
+    done = {(r["key"], r["config_hash"]) for r in rows}
+    log(f"bench {preset_name}: {len(todo)} job(s) on {', '.join(needed)}; "
+        f"{sum((j.key, j.config_hash()) in done for j in todo)} already in {results_path}")
+    t0 = time.time()
+    for n, job in enumerate(todo, 1):
+        if (job.key, job.config_hash()) in done:
+            continue
+        log(f"bench [{n}/{len(todo)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
+        row = run_job(job, cfg, data_root, out_root, progress)
+        rows = [r for r in rows if r["key"] != job.key] + [row]
+        write_results(results_path, rows)
+        log(f"bench [{n}/{len(todo)}] {job.key}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
+            f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
+    log(f"bench {preset_name}: done in {time.time() - t0:.0f} s -> {results_path}")
+    return rows
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit("use `e4dgs bench`")

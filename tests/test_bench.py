@@ -1,0 +1,175 @@
+"""The benchmark harness: metrics against analytic cases and scikit-image, the runner end to end on
+the tiny dataset (with a resume after a simulated kill), and report generation from stored rows."""
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter
+
+from benchmark.config import MAIN_CELLS, BenchConfig, CellSpec, jobs, load_bench
+from benchmark.metrics.image import psnr, score_pairs, ssim
+from benchmark.report import write_report
+from benchmark.runner import read_results, run_bench
+from e4dgs.config import ConfigError, build_config
+
+
+# ---------------------------------------------------------------- metrics
+
+def _ssim_reference(a, b, sigma=1.5, c1=0.01 ** 2, c2=0.03 ** 2):
+    """Wang et al.'s SSIM with a Gaussian window, written out (population statistics), mean over the
+    image minus a border of 3.5 sigma (where scikit-image crops its mean)."""
+    f = lambda x: gaussian_filter(x, sigma, truncate=3.5, mode="reflect")  # noqa: E731
+    mu_a, mu_b = f(a), f(b)
+    va, vb, cov = f(a * a) - mu_a ** 2, f(b * b) - mu_b ** 2, f(a * b) - mu_a * mu_b
+    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a ** 2 + mu_b ** 2 + c1) * (va + vb + c2))
+    pad = (int(3.5 * sigma + 0.5) * 2 + 1 - 1) // 2
+    return float(s[pad:-pad, pad:-pad].mean())
+
+
+def test_psnr_analytic():
+    a = np.full((16, 16), 0.5)
+    assert psnr(a, a) == math.inf
+    b = a + 0.1            # MSE 0.01 -> 20 dB
+    assert psnr(b, a) == pytest.approx(20.0, abs=1e-9)
+    assert score_pairs([(a, a), (b, a)], lpips_net=None)["psnr"] == pytest.approx((100 + 20) / 2)
+
+
+def test_psnr_is_per_image_then_averaged():
+    a = np.zeros((16, 16))
+    pairs = [(a + 0.1, a), (a + 0.01, a)]        # 20 dB and 40 dB
+    assert score_pairs(pairs, lpips_net=None)["psnr"] == pytest.approx(30.0)   # a pooled MSE would give ~23 dB
+
+
+def test_ssim_constant_images():
+    a, b = np.full((32, 32), 0.2), np.full((32, 32), 0.6)
+    c1 = 0.01 ** 2
+    assert ssim(a, a) == pytest.approx(1.0)
+    assert ssim(a, b) == pytest.approx((2 * 0.2 * 0.6 + c1) / (0.2 ** 2 + 0.6 ** 2 + c1), rel=1e-6)
+
+
+def test_ssim_matches_a_written_out_reference_and_colour_is_mean_of_channels():
+    rng = np.random.default_rng(0)
+    a = gaussian_filter(rng.random((48, 64)), 2)
+    b = np.clip(a + 0.05 * rng.standard_normal(a.shape), 0, 1)
+    assert ssim(a, b) == pytest.approx(_ssim_reference(a, b), abs=1e-6)
+    rgb_a, rgb_b = np.stack([a, a ** 2, 1 - a], -1), np.stack([b, b ** 2, 1 - b], -1)
+    want = np.mean([ssim(rgb_a[..., c], rgb_b[..., c]) for c in range(3)])
+    assert ssim(rgb_a, rgb_b) == pytest.approx(want, rel=1e-9)
+    assert ssim(a[..., None], b[..., None]) == pytest.approx(ssim(a, b))
+
+
+# ---------------------------------------------------------------- presets
+
+def test_shipped_presets_load_and_cover_every_method():
+    for name in ("quick", "paper"):
+        cfg = load_bench(name)
+        keys = [j.key for j in jobs(cfg)]
+        assert len(keys) == len(set(keys))
+        assert {j.cell for j in jobs(cfg) if j.study == "main"} == set(MAIN_CELLS)
+    assert len(load_bench("paper").scenes) == 8
+
+
+def test_preset_errors_name_the_key(tmp_path):
+    bad = tmp_path / "b.yaml"
+    bad.write_text("scenes: [a]\ncells: {d3dgs_sharp: {method: d3dgs}}\n")
+    with pytest.raises(ConfigError, match="missing"):
+        load_bench(bad)
+    bad.write_text("scenes: [a]\nsceens: [b]\n")
+    with pytest.raises(ConfigError, match="sceens"):
+        load_bench(bad)
+
+
+# ---------------------------------------------------------------- the runner, end to end
+
+TINY_TRAIN = {"train.iterations": 12, "train.scale_schedule": False, "train.warm_up": 200,
+              "train.densify.enabled": False, "train.init.n_points_object": 300, "train.checkpoint_every": 5,
+              "train.snapshots": [0.5, 1.0]}
+
+
+def _tiny_bench(motion_scene) -> BenchConfig:
+    cells = {
+        "d3dgs_sharp": CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "sharp"}),
+        "d3dgs_blur": CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "strong"}),
+        "e2vid_d3dgs": CellSpec("e2vid_d3dgs", overrides=TINY_TRAIN),
+        "e4dgs": CellSpec("e4dgs", overrides=TINY_TRAIN),
+        "e4dgs_rgb": CellSpec("e4dgs_rgb", overrides={**TINY_TRAIN, "rgb_frames": "strong"}),
+    }
+    return build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name], "cells": cells,
+                                      "blur": {"scene": motion_scene.name, "levels": ["mild", "strong"],
+                                               "cells": ["d3dgs_blur", "e4dgs"]},
+                                      "ablation": {"scene": motion_scene.name, "switches": {"w/o AES": {"events.aes": False}}},
+                                      "lpips_net": "alex"})
+
+
+def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
+    from benchmark import runner
+
+    cfg = _tiny_bench(motion_scene)
+    out = tmp_path / "runs"
+    real = runner.run_job
+    calls = []
+
+    def killed_after_two(job, *a, **k):
+        if len(calls) == 2:
+            raise KeyboardInterrupt          # a kill between jobs
+        calls.append(job.key)
+        return real(job, *a, **k)
+
+    monkeypatch.setattr(runner, "run_job", killed_after_two)
+    with pytest.raises(KeyboardInterrupt):
+        run_bench(cfg, "tiny", motion_scene.parent, out, progress=False, log=lambda s: None)
+    first = read_results(out / "results.jsonl")
+    assert [r["key"] for r in first] == calls
+
+    resumed = []
+    monkeypatch.setattr(runner, "run_job", lambda job, *a, **k: resumed.append(job.key) or real(job, *a, **k))
+    rows = run_bench(cfg, "tiny", motion_scene.parent, out, progress=False, log=lambda s: None)
+    assert not set(resumed) & set(calls)                     # finished jobs are reused, not retrained
+    keys = {r["key"] for r in rows}
+    assert {f"main/{motion_scene.name}/{c}" for c in MAIN_CELLS} <= keys
+    assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES" in keys
+    assert not any(k.startswith("blur/") and "/e4dgs/" in k for k in keys)   # events-only: blur cannot matter
+    for r in rows:
+        assert r["iterations"] == 12 and np.isfinite([r["psnr"], r["ssim"], r["lpips"]]).all()
+        assert r["channels"] == (1 if r["method"] in ("e4dgs", "e2vid_d3dgs") else 3)
+        assert [s["iteration"] for s in r["snapshots"]] == [6, 12] and r["versions"]["torch"]
+    paths = write_report(rows, out)
+    assert (out / "leaderboard.md").exists() and (out / "accuracy_vs_time.png").stat().st_size > 1000
+    assert {p.name for p in paths} >= {"leaderboard.md", "leaderboard.csv", "blur.md", "ablation.md"}
+
+
+# ---------------------------------------------------------------- reports from stored rows
+
+def _row(study, scene, cell, psnr_db, variant="", ssim_v=0.9, lpips_v=0.1):
+    return {"key": "/".join(p for p in (study, scene, cell, variant) if p), "study": study, "scene": scene,
+            "cell": cell, "variant": variant, "psnr": psnr_db, "ssim": ssim_v, "lpips": lpips_v, "iterations": 10,
+            "wall_s": 100.0, "n_gaussians": 1000, "snapshots": [{"iteration": 5, "wall_s": 50.0, "psnr": psnr_db - 1},
+                                                              {"iteration": 10, "wall_s": 100.0, "psnr": psnr_db}]}
+
+
+def test_report_from_stored_results(tmp_path):
+    rows = []
+    for scene, base in (("a", 20.0), ("b", 22.0)):
+        for k, cell in enumerate(MAIN_CELLS):
+            rows.append(_row("main", scene, cell, base + k, lpips_v=0.5 - 0.1 * k))
+    rows += [_row("blur", "a", "d3dgs_blur", 19.0, "mild"), _row("blur", "a", "d3dgs_blur", 17.0, "strong"),
+             _row("ablation", "a", "e4dgs", 21.5, "w/o TV")]
+    (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    write_report(read_results(tmp_path / "results.jsonl"), tmp_path, "# title")
+    md = (tmp_path / "leaderboard.md").read_text()
+    line = next(l for l in md.splitlines() if l.startswith("| E-4DGS (events + blurred RGB)"))
+    assert "**24.00**" in line and "**26.00**" in line and "**25.00**" in line   # best PSNR: a, b, average
+    second = next(l for l in md.splitlines() if l.startswith("| E-4DGS (events) |"))
+    assert "<u>23.00</u>" in second and "<u>0.200</u>" in second
+    csv_lines = (tmp_path / "leaderboard.csv").read_text().splitlines()
+    assert csv_lines[0].startswith("method,label,a_psnr") and len(csv_lines) == 6
+    blur = (tmp_path / "blur.md").read_text()
+    assert "19.00" in blur and "17.00" in blur and "23.00" in blur       # events-only row from the main run
+    assert "w/o TV" in (tmp_path / "ablation.md").read_text()
+    assert "5 @ 50 s → 19.00" in (tmp_path / "accuracy_vs_time.md").read_text()
+
+
+def test_report_refuses_empty_results(tmp_path):
+    with pytest.raises(ValueError, match="no results"):
+        write_report([], tmp_path)
