@@ -8,7 +8,7 @@ PRESET ?= quick
 SCENES ?=
 JOBS   ?= 1
 
-.PHONY: test install dataset clean-venv
+.PHONY: test install dataset benchmark clean-venv
 
 install: $(STAMP)
 
@@ -27,6 +27,11 @@ test: $(STAMP)
 # The synthetic dataset: `make dataset`, `make dataset PRESET=paper`, `make dataset SCENES=lego,garage`.
 dataset: $(STAMP)
 	$(VENV)/bin/e4dgs dataset --preset $(PRESET) $(if $(SCENES),--scenes $(SCENES)) --jobs $(JOBS) --out data/$(PRESET)
+
+# The leaderboard: `make benchmark` (quick preset, dataset included, < 1 h on 2 CPU cores),
+# `make benchmark PRESET=paper`. Results and tables land in runs/<preset>/.
+benchmark: $(STAMP)
+	NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache $(VENV)/bin/e4dgs bench --preset $(PRESET) $(if $(SCENES),--scenes $(SCENES))
 
 clean-venv:
 	rm -rf $(VENV)

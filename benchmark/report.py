@@ -1,6 +1,6 @@
 """Tables and plots from results.jsonl (`e4dgs bench --report` regenerates them without training).
 
-leaderboard.md / .csv   the paper's Table 1 layout: per scene PSNR / SSIM / LPIPS, their average and
+leaderboard.md/.csv/.json  the paper's Table 1 layout: per scene PSNR / SSIM / LPIPS, their average and
                         the training time; best in bold, second best underlined (per column)
 accuracy_vs_time.png/.md  test PSNR against training wall-clock seconds at each snapshot
 blur.md                 the blur-robustness study (events-only methods never see RGB: one value for all levels)
@@ -169,12 +169,26 @@ def ablation_table(rows: list[dict]) -> str:
     return md.getvalue()
 
 
+def leaderboard_json(rows: list[dict]) -> str:
+    """{cell: {label, scenes: {scene: {psnr, ssim, lpips, wall_s, iterations}}, average: {...}}}."""
+    import json
+
+    scenes, table = main_table(rows)
+    out = {}
+    for c in [c for c in MAIN_CELLS if c in table]:
+        per = {s: {k: table[c][s][k] for k in ("psnr", "ssim", "lpips", "wall_s", "iterations", "n_gaussians")}
+               for s in scenes if s in table[c]}
+        out[c] = {"label": LABELS.get(c, c), "scenes": per,
+                  "average": {k: _average(table, c, scenes, k) for k in ("psnr", "ssim", "lpips", "wall_s")}}
+    return json.dumps(out, indent=1)
+
+
 def write_report(rows: list[dict], out_root: Path, header: str = "") -> list[Path]:
     if not rows:
         raise ValueError(f"{out_root}: no results to report")
     md, table_csv = leaderboard(rows, header)
     written = []
-    for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv),
+    for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv), ("leaderboard.json", leaderboard_json(rows)),
                        ("accuracy_vs_time.md", accuracy_vs_time(rows)), ("blur.md", blur_table(rows)),
                        ("ablation.md", ablation_table(rows))):
         if text:

@@ -153,11 +153,11 @@ class E2VIDTrainer:
             self.opt.step()
             self.iteration += 1
             self.wall_s += time.perf_counter() - t0
-            self.log.append({"iteration": self.iteration, "wall_s": round(self.wall_s, 2), "loss": round(float(loss), 5),
+            self.log.append({"iteration": self.iteration, "wall_s": round(self.wall_s, 2), "loss": round(loss.item(), 5),
                              **{k: round(v, 5) for k, v in parts.items()}, "data_s": round(t_data, 3),
                              "events_per_px": round(float(batch.n_events.mean()) / (batch.voxels.shape[-1] * batch.voxels.shape[-2]), 3)})
             bar.update(1)
-            bar.set_postfix(loss=f"{float(loss):.4f}", l1=f"{parts['l1']:.3f}")
+            bar.set_postfix(loss=f"{loss.item():.4f}", l1=f"{parts['l1']:.3f}")
             if self.iteration % self.cfg.checkpoint_every == 0 or self.iteration == self.cfg.iterations:
                 self._save()
         bar.close()

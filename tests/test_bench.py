@@ -162,6 +162,8 @@ def test_report_from_stored_results(tmp_path):
     assert "**24.00**" in line and "**26.00**" in line and "**25.00**" in line   # best PSNR: a, b, average
     second = next(l for l in md.splitlines() if l.startswith("| E-4DGS (events) |"))
     assert "<u>23.00</u>" in second and "<u>0.200</u>" in second
+    board = json.loads((tmp_path / "leaderboard.json").read_text())
+    assert board["e4dgs_rgb"]["average"]["psnr"] == pytest.approx(25.0) and set(board["e4dgs"]["scenes"]) == {"a", "b"}
     csv_lines = (tmp_path / "leaderboard.csv").read_text().splitlines()
     assert csv_lines[0].startswith("method,label,a_psnr") and len(csv_lines) == 6
     blur = (tmp_path / "blur.md").read_text()
@@ -173,3 +175,17 @@ def test_report_from_stored_results(tmp_path):
 def test_report_refuses_empty_results(tmp_path):
     with pytest.raises(ValueError, match="no results"):
         write_report([], tmp_path)
+
+
+def test_bench_report_cli_regenerates_without_training(tmp_path):
+    from e4dgs.cli import main
+
+    rows = [_row("main", "lego", c, 20.0 + k) for k, c in enumerate(MAIN_CELLS)]
+    (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    assert main(["bench", "--preset", "quick", "--out", str(tmp_path), "--report"]) == 0
+    md = (tmp_path / "leaderboard.md").read_text()
+    assert "`quick` preset" in md and "2-core CPU" in md and "**24.00**" in md
+    with pytest.raises(SystemExit, match="nosuch"):
+        main(["bench", "--preset", "nosuch", "--report"])
+    with pytest.raises(SystemExit, match="not in preset"):
+        main(["bench", "--preset", "quick", "--scenes", "atlantis", "--out", str(tmp_path)])
