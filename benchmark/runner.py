@@ -131,6 +131,8 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     results_path = out_root / "results.jsonl"
     rows = read_results(results_path)
     done = {(r["key"], r["config_hash"]) for r in rows}
+    if cfg.description:
+        log(f"bench {preset_name}: " + " ".join(cfg.description.split()))
     log(f"bench {preset_name}: {len(todo)} job(s) on {', '.join(needed)}; "
         f"{sum((j.key, j.config_hash()) in done for j in todo)} already in {results_path}")
     t0 = time.time()
