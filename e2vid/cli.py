@@ -36,7 +36,14 @@ def run_train_e2vid(args: argparse.Namespace) -> int:
     report = evaluate_heldout(net, n_sequences=args.val_sequences, progress=not args.no_progress)
     write_text_atomic(args.out / "report.json", json.dumps(report, indent=1))
     if args.export:
+        from e2vid.report import training_report_md
+        from e4dgs.config import dump_config
+
         trainer.export(args.export, {"heldout": report})
+        overrides = " ".join(f"--set {o}" for o in args.overrides)
+        write_text_atomic(args.export.with_name("README.md"), training_report_md(
+            cfg.arch, trainer.iteration, trainer.wall_s, trainer.log, report, dump_config(cfg),
+            f"e4dgs train-e2vid {overrides} --export {args.export}".replace("  ", " ")))
     print(f"train-e2vid: {cfg.arch}, {trainer.iteration} iterations, {trainer.wall_s:.0f} s; held-out "
           f"PSNR {report['network']['psnr']:.2f} dB raw / {report['network_corrected']['psnr']:.2f} corrected, "
           f"high-pass filter {report['hpf_corrected']['psnr']:.2f} corrected -> {args.out}")

@@ -343,3 +343,17 @@ def test_e2vid_cli_writes_frames(motion_scene, tmp_path):
     assert len(pngs) == len(times) >= 3 and times == sorted(times)
     with pytest.raises(SystemExit, match="nope.h5"):
         main(["e2vid", "--events", str(tmp_path / "nope.h5"), "--out", str(out)])
+
+
+def test_weights_report_lists_the_curve_and_heldout_numbers():
+    from e2vid.report import loss_curve_rows, training_report_md
+
+    log = [{"iteration": i, "loss": 1.0 / i, "l1": 0.5, "lpips": 0.25, "tc": 0.01} for i in range(1, 101)]
+    rows = loss_curve_rows(log, n_rows=4)
+    assert [r["iterations"] for r in rows] == ["1-25", "26-50", "51-75", "76-100"]
+    assert rows[0]["loss"] > rows[-1]["loss"]
+    held = {k: {"psnr": p, "ssim": 0.5} for k, p in (("network", 17.25), ("network_corrected", 21.5),
+                                                      ("hpf_corrected", 19.75))}
+    held["sequences"] = {"n": 8, "steps": 24, "size": [112, 144], "skip": 4, "seed_base": 1 << 40}
+    md = training_report_md("firenet", 100, 600.0, log, held, "arch: firenet\n", "e4dgs train-e2vid")
+    assert "17.25" in md and "21.50" in md and "19.75" in md and "10.0 min" in md and "| 76-100 |" in md
