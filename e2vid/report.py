@@ -31,10 +31,12 @@ def training_report_md(arch: str, iterations: int, wall_s: float, log: list[dict
     s = heldout["sequences"]
     lines += ["", f"## Held-out quality ({s['n']} simulated sequences of {s['steps']} steps at "
               f"{s['size'][1]}x{s['size'][0]}, seeds from {s['seed_base']}, first {s['skip']} frames skipped)", "",
-              "| reconstruction | PSNR | SSIM |", "|---|---|---|"]
+              "| reconstruction | PSNR | SSIM | correlation |", "|---|---|---|---|"]
     names = {"network": f"{arch}, raw output", "network_corrected": f"{arch}, after log gain/offset fit",
              "hpf_corrected": f"high-pass filter (cutoff {heldout.get('hpf_cutoff_rad_s', 30)} rad/s), after the same fit"}
     for key, label in names.items():
-        lines.append(f"| {label} | {heldout[key]['psnr']:.2f} | {heldout[key]['ssim']:.3f} |")
+        corr = heldout[key].get("corr")
+        lines.append(f"| {label} | {heldout[key]['psnr']:.2f} | {heldout[key]['ssim']:.3f} | "
+                     f"{'' if corr is None else f'{corr:.3f}'} |")
     lines += ["", "## Config", "", "```yaml", config_yaml.rstrip(), "```", ""]
     return "\n".join(lines)

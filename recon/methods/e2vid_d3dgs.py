@@ -47,7 +47,7 @@ class E2VIDD3DGS(D3DGS):
     def training_views(self) -> list[TrainView]:
         records = self.training_records()
         views = []
-        with torch.inference_mode():
+        with torch.no_grad():
             for cam in sorted({r.camera for r in records}):
                 recs = sorted((r for r in records if r.camera == cam), key=lambda r: r.t_us)
                 frames = reconstruct_camera(self.dataset, cam, np.array([r.t_us for r in recs]),
