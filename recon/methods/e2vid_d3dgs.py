@@ -24,10 +24,11 @@ from recon.views import record_camera
 from simulator.h5io import read_events
 
 
-def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, weights: str = "",
+def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, net: torch.nn.Module | None = None,
                        events_per_window: int = 0) -> np.ndarray:
-    """Frames [K, H, W] in [0, 1] of camera `camera` at the sorted times t_us."""
-    net, _ = load_checkpoint(weights or default_weights_path())
+    """Frames [K, H, W] in [0, 1] of camera `camera` at the sorted times t_us (net: the shipped one if None)."""
+    if net is None:
+        net, _ = load_checkpoint(default_weights_path())
     stream = read_events(dataset.event_file(camera))
     return reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height,
                               np.asarray(t_us, np.int64), events_per_window or None, net.cfg.num_bins)
@@ -47,11 +48,12 @@ class E2VIDD3DGS(D3DGS):
     def training_views(self) -> list[TrainView]:
         records = self.training_records()
         views = []
+        net, _ = load_checkpoint(self.cfg.weights or default_weights_path())   # once, for every camera
         with torch.no_grad():
             for cam in sorted({r.camera for r in records}):
                 recs = sorted((r for r in records if r.camera == cam), key=lambda r: r.t_us)
                 frames = reconstruct_camera(self.dataset, cam, np.array([r.t_us for r in recs]),
-                                            self.cfg.weights, self.cfg.events_per_window)
+                                            net, self.cfg.events_per_window)
                 views += [TrainView(record_camera(self.dataset, r), r.time, torch.from_numpy(f[..., None].copy()))
                           for r, f in zip(recs, frames)]
         return views
