@@ -30,10 +30,13 @@ def run_train_e2vid(args: argparse.Namespace) -> int:
     try:
         cfg = build_config(E2VIDTrainConfig, args.config, parse_set(args.overrides))
         trainer = E2VIDTrainer(cfg, args.out, progress=not args.no_progress)
-        net = trainer.run()
+        trainer.run()
+        selected = trainer.use_best()
+        net = trainer.net
     except (ConfigError, ValueError, FileNotFoundError) as exc:
         raise SystemExit(f"error: {exc}") from None
     report = evaluate_heldout(net, n_sequences=args.val_sequences, progress=not args.no_progress)
+    report["selected"] = selected
     write_text_atomic(args.out / "report.json", json.dumps(report, indent=1))
     if args.export:
         from e2vid.report import training_report_md

@@ -1,6 +1,6 @@
 """Held-out quality of an events-to-video network on simulated sequences, against the high-pass filter.
 
-Sequences come from seeds >= train.VAL_SEED_BASE (never used for training), are longer than the
+Sequences come from seeds >= synth.VAL_SEED_BASE (never used for training), are longer than the
 training sequences and at a different size. Scores are per-frame PSNR / SSIM against the sharp
 frames, averaged, skipping the first `skip` frames (every method needs events before it can show
 anything). The network is scored raw and after the log-intensity gain/offset fit E-4DGS is scored
@@ -19,8 +19,7 @@ from tqdm import tqdm
 from benchmark.metrics.image import score_pairs
 from e2vid.networks import Reconstructor
 from e2vid.reconstruct import hpf_display, hpf_log_frames
-from e2vid.synth import SynthConfig, make_sequence
-from e2vid.train import VAL_SEED_BASE
+from e2vid.synth import VAL_SEED_BASE, SynthConfig, make_sequence
 from recon.color import correct_colors
 
 HELDOUT = SynthConfig(height=112, width=144, n_steps=24)
@@ -36,6 +35,31 @@ def correlation(pred: np.ndarray, gt: np.ndarray) -> float:
     b = gt.astype(np.float64).ravel() - gt.mean()
     den = np.sqrt((a * a).sum() * (b * b).sum())
     return float((a * b).sum() / den) if den > 1e-12 else 0.0
+
+
+MONITOR_SEED_OFFSET = 1 << 20     # training-time monitor clips: held-out seeds, disjoint from the report's
+
+
+def monitor_sequences(n: int, cfg: SynthConfig) -> list:
+    """`n` held-out clips for tracking structure (correlation) while training."""
+    return [make_sequence(VAL_SEED_BASE + MONITOR_SEED_OFFSET + i, cfg) for i in range(n)]
+
+
+def mean_correlation(net: torch.nn.Module, sequences: list, skip: int = 4) -> float:
+    """Mean per-frame correlation of the network's output with the ground truth, from a zero state per clip,
+    skipping each clip's first `skip` frames."""
+    was_training = net.training
+    net.eval()
+    scores = []
+    with torch.no_grad():
+        for seq in sequences:
+            states = None
+            for t in range(seq.voxels.shape[0]):
+                pred, states = net(seq.voxels[t][None], states)
+                if t >= skip:
+                    scores.append(correlation(pred[0, 0].numpy(), seq.targets[t, 0].numpy()))
+    net.train(was_training)
+    return float(np.mean(scores)) if scores else 0.0
 
 
 def evaluate_heldout(net: torch.nn.Module, n_sequences: int = 8, cfg: SynthConfig = HELDOUT, skip: int = 4,

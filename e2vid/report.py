@@ -12,8 +12,10 @@ def loss_curve_rows(log: list[dict], n_rows: int = 8) -> list[dict]:
     rows = []
     for a, b in zip(edges[:-1], edges[1:]):
         seg = log[a:b]
-        rows.append({"iterations": f"{seg[0]['iteration']}-{seg[-1]['iteration']}",
-                     **{k: float(np.mean([r[k] for r in seg])) for k in ("loss", "l1", "lpips", "tc")}})
+        corr = [r["monitor_corr"] for r in seg if "monitor_corr" in r]
+        rows.append({"iterations": f"{seg[0]['iteration']}-{seg[-1]['iteration']}", "wall_s": seg[-1]["wall_s"],
+                     **{k: float(np.mean([r[k] for r in seg])) for k in ("loss", "l1", "lpips", "tc")},
+                     "monitor_corr": corr[-1] if corr else None})
     return rows
 
 
@@ -25,9 +27,18 @@ def training_report_md(arch: str, iterations: int, wall_s: float, log: list[dict
              "shapes moved by random 2D similarity motions, rendered at 3000 frames/s, turned into events by the",
              "project's simulator with a random sensor per sequence; no benchmark scene is used).", "",
              "## Loss curve (means over slices of training)", "",
-             "| iterations | total | L1 | LPIPS (alex) | temporal |", "|---|---|---|---|---|"]
+             "Monitor correlation: mean per-frame correlation with the ground truth on held-out monitor clips, at",
+             "the end of the slice.", "",
+             "| iterations | wall (min) | total | L1 | LPIPS (alex) | temporal | monitor correlation |",
+             "|---|---|---|---|---|---|---|"]
     for r in loss_curve_rows(log):
-        lines.append(f"| {r['iterations']} | {r['loss']:.4f} | {r['l1']:.4f} | {r['lpips']:.4f} | {r['tc']:.4f} |")
+        corr = "" if r["monitor_corr"] is None else f"{r['monitor_corr']:.3f}"
+        lines.append(f"| {r['iterations']} | {r['wall_s'] / 60:.1f} | {r['loss']:.4f} | {r['l1']:.4f} | "
+                     f"{r['lpips']:.4f} | {r['tc']:.4f} | {corr} |")
+    sel = heldout.get("selected")
+    if sel and sel.get("monitor_corr") is not None:
+        lines += ["", f"Shipped weights: iteration {sel['iteration']}, the best monitor correlation "
+                  f"({sel['monitor_corr']:.3f})."]
     s = heldout["sequences"]
     lines += ["", f"## Held-out quality ({s['n']} simulated sequences of {s['steps']} steps at "
               f"{s['size'][1]}x{s['size'][0]}, seeds from {s['seed_base']}, first {s['skip']} frames skipped)", "",

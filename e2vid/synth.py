@@ -23,12 +23,14 @@ from e2vid.voxel import normalize_voxel, voxel_grid_events
 from simulator import EventSimulator, SimulatorConfig
 from simulator.pixel import srgb_to_linear
 
+VAL_SEED_BASE = 1 << 40            # held-out sequences use seeds >= this; training seeds stay below
+
 
 @dataclass(frozen=True)
 class SynthConfig:
-    height: int = 96
-    width: int = 96
-    n_steps: int = 8                   # voxel grids (network calls) per sequence
+    height: int = 64
+    width: int = 64
+    n_steps: int = 32                  # voxel grids (network calls) per sequence
     substeps: int = 10                 # rendered frames per step
     fps: float = 3000.0                # as the dataset renders
     num_bins: int = 5

@@ -254,8 +254,10 @@ def test_flow_grid_maps_pixels_to_their_previous_position():
 
 def _tiny_train_cfg(**kw):
     from e2vid.train import E2VIDTrainConfig
-    return E2VIDTrainConfig(iterations=6, batch_size=2, checkpoint_every=2, lpips_net="alex", threads=1,
-                            synth=SynthConfig(height=32, width=32, n_steps=3, substeps=4), **kw)
+    base = dict(iterations=6, batch_size=2, checkpoint_every=2, lpips_net="alex", lpips_start=3, threads=1, tbptt=2,
+                monitor_every=3, monitor_sequences=1, monitor_size=(24, 24), data_workers=0,
+                synth=SynthConfig(height=32, width=32, n_steps=3, substeps=4))
+    return E2VIDTrainConfig(**{**base, **kw})
 
 
 def test_train_e2vid_resumes_to_the_same_weights(tmp_path, monkeypatch):
@@ -280,8 +282,15 @@ def test_train_e2vid_resumes_to_the_same_weights(tmp_path, monkeypatch):
     resumed = tr.E2VIDTrainer(_tiny_train_cfg(), tmp_path / "killed", progress=False)
     resumed.run()
     assert [r["iteration"] for r in resumed.log] == list(range(1, 7))
+    assert [r["iteration"] for r in resumed.log if "monitor_corr" in r] == [3, 6]
+    assert all(-1 <= r["monitor_corr"] <= 1 for r in resumed.log if "monitor_corr" in r)
+    # LPIPS counts from lpips_start (iteration index 3, logged as iteration 4) on
+    assert [r["lpips"] > 0 for r in resumed.log] == [False] * 3 + [True] * 3
     for k, v in full.net.state_dict().items():
         torch.testing.assert_close(resumed.net.state_dict()[k], v, rtol=1e-5, atol=1e-6)
+    # the kept weights are the best by monitor correlation, and use_best loads them
+    best = max((r for r in resumed.log if "monitor_corr" in r), key=lambda r: r["monitor_corr"])
+    assert resumed.use_best() == {"iteration": best["iteration"], "monitor_corr": best["monitor_corr"]}
     # another config in the same folder is refused, not silently mixed
     with pytest.raises(ValueError, match="different config"):
         tr.E2VIDTrainer(_tiny_train_cfg(lr=5e-4), tmp_path / "killed", progress=False).run()
@@ -292,10 +301,36 @@ def test_training_loss_terms_are_finite_and_temporal_term_sees_motion():
     net = build_network(FIRENET)
     seq = make_sequence(3, SynthConfig(height=32, width=32, n_steps=3, substeps=4))
     batch = type(seq)(seq.voxels[:, None], seq.targets[:, None], seq.flow[:, None], seq.n_events[:, None])
-    loss, parts = sequence_loss(net, batch, E2VIDTrainConfig(lambda_lpips=0.0), None)
+    loss, parts, _, _ = sequence_loss(net, batch, E2VIDTrainConfig(lambda_lpips=0.0), None)
     assert torch.isfinite(loss) and parts["l1"] > 0 and parts["tc"] >= 0
     loss.backward()
     assert all(torch.isfinite(p.grad).all() for p in net.parameters() if p.grad is not None)
+
+
+def test_chunked_loss_with_carried_state_equals_the_whole_sequence_loss():
+    # truncated BPTT changes the gradients, never the forward values: chunks [0, 2) and [2, 5) with the
+    # state and last output carried give the same per-step losses as one pass over [0, 5)
+    from e2vid.train import E2VIDTrainConfig, sequence_loss
+    torch.manual_seed(0)
+    net = build_network(FIRENET)
+    seq = make_sequence(4, SynthConfig(height=32, width=32, n_steps=5, substeps=4))
+    batch = type(seq)(seq.voxels[:, None], seq.targets[:, None], seq.flow[:, None], seq.n_events[:, None])
+    cfg = E2VIDTrainConfig(lambda_lpips=0.0)
+    with torch.no_grad():
+        whole, parts, _, _ = sequence_loss(net, batch, cfg, None)
+        a, pa, st, prev = sequence_loss(net, batch, cfg, None, 0, 2)
+        b, pb, _, _ = sequence_loss(net, batch, cfg, None, 2, 5, st, prev)
+    torch.testing.assert_close(whole, (2 * a + 3 * b) / 5)
+    assert parts["tc"] == pytest.approx((2 * pa["tc"] + 3 * pb["tc"]) / 5) and pb["tc"] > 0
+
+
+def test_background_data_workers_train_the_same_weights_as_inline(tmp_path):
+    from e2vid import train as tr
+    inline = tr.E2VIDTrainer(_tiny_train_cfg(iterations=3, monitor_every=0), tmp_path / "a", progress=False).run()
+    worker = tr.E2VIDTrainer(_tiny_train_cfg(iterations=3, monitor_every=0, data_workers=1), tmp_path / "b",
+                             progress=False).run()
+    for k, v in inline.state_dict().items():
+        torch.testing.assert_close(worker.state_dict()[k], v)
 
 
 # ---------------------------------------------------------------- the shipped weights and the baseline method
@@ -373,12 +408,16 @@ def test_e2vid_cli_writes_frames(motion_scene, tmp_path):
 def test_weights_report_lists_the_curve_and_heldout_numbers():
     from e2vid.report import loss_curve_rows, training_report_md
 
-    log = [{"iteration": i, "loss": 1.0 / i, "l1": 0.5, "lpips": 0.25, "tc": 0.01} for i in range(1, 101)]
+    log = [{"iteration": i, "wall_s": 6.0 * i, "loss": 1.0 / i, "l1": 0.5, "lpips": 0.25, "tc": 0.01,
+            **({"monitor_corr": i / 200} if i % 10 == 0 else {})} for i in range(1, 101)]
     rows = loss_curve_rows(log, n_rows=4)
     assert [r["iterations"] for r in rows] == ["1-25", "26-50", "51-75", "76-100"]
     assert rows[0]["loss"] > rows[-1]["loss"]
+    assert [r["monitor_corr"] for r in rows] == [0.1, 0.25, 0.35, 0.5]     # the last check in each slice
     held = {k: {"psnr": p, "ssim": 0.5} for k, p in (("network", 17.25), ("network_corrected", 21.5),
                                                       ("hpf_corrected", 19.75))}
     held["sequences"] = {"n": 8, "steps": 24, "size": [112, 144], "skip": 4, "seed_base": 1 << 40}
+    held["selected"] = {"iteration": 90, "monitor_corr": 0.45}
     md = training_report_md("firenet", 100, 600.0, log, held, "arch: firenet\n", "e4dgs train-e2vid")
+    assert "iteration 90, the best monitor correlation (0.450)" in md
     assert "17.25" in md and "21.50" in md and "19.75" in md and "10.0 min" in md and "-100 |" in md
