@@ -125,7 +125,9 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     todo = [j for j in jobs(cfg) if j.study in studies and (not scenes or j.scene in scenes)
             and (not cells or j.cell in cells)]
     needed = sorted({j.scene for j in todo})
+    t_start = time.time()
     ensure_dataset(BenchConfig(**{**cfg.__dict__, "scenes": tuple(needed)}), data_root, log)
+    dataset_s = time.time() - t_start
     out_root.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out_root / "bench.json", json.dumps({"preset": preset_name, **dump(cfg)}, indent=1))
     results_path = out_root / "results.jsonl"
@@ -145,7 +147,8 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
         write_results(results_path, rows)
         log(f"bench [{n}/{len(todo)}] {job.key}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
             f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
-    log(f"bench {preset_name}: done in {time.time() - t0:.0f} s -> {results_path}")
+    log(f"bench {preset_name}: done in {time.time() - t_start:.0f} s ({dataset_s:.0f} s dataset, "
+        f"{time.time() - t0:.0f} s jobs) -> {results_path}")
     return rows
 
 

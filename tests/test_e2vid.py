@@ -9,7 +9,7 @@ from e2vid.networks import FIRENET, NetConfig, Reconstructor, build_network, pad
 from e2vid.official import CheckpointError, infer_config, load_checkpoint, save_checkpoint
 from e2vid.reconstruct import hpf_log_frames, reconstruct_frames, split_windows
 from e2vid.synth import SynthConfig, flow_grid, make_sequence, similarity
-from e2vid.voxel import normalize_voxel, voxel_grid, voxel_grid_events, voxel_grid_ref
+from e2vid.voxel import normalize_voxel, voxel_grid, voxel_grid_ref
 from simulator import make_events
 
 
@@ -335,35 +335,20 @@ def test_background_data_workers_train_the_same_weights_as_inline(tmp_path):
 
 # ---------------------------------------------------------------- the shipped weights and the baseline method
 
-def test_shipped_weights_load_and_learned_the_brightness_level():
-    """What the shipped weights do achieve: raw PSNR above an untrained network (the mean level)."""
-    from e2vid.evaluate import evaluate_heldout
-    from e2vid.weights import default_weights_path
-
-    net, extra = load_checkpoint(default_weights_path())
-    assert net.cfg.arch == "firenet" and extra["e4dgs_training"]["iterations"] == 3500
-    cfg = SynthConfig(height=64, width=80, n_steps=12)
-    trained = evaluate_heldout(net, n_sequences=3, cfg=cfg, skip=3)
-    torch.manual_seed(0)
-    untrained = evaluate_heldout(build_network(net.cfg), n_sequences=3, cfg=cfg, skip=3)
-    assert trained["network"]["psnr"] > untrained["network"]["psnr"] + 2.0
-
-
-@pytest.mark.xfail(strict=True, reason="the shipped FireNet (30 min of CPU training) does not reconstruct structure: "
-                                       "held-out correlation ~0 (e2vid/weights/README.md); retrain, then drop this marker")
 def test_shipped_weights_beat_an_untrained_network_on_a_heldout_clip():
     from e2vid.evaluate import evaluate_heldout
     from e2vid.weights import default_weights_path
 
     net, extra = load_checkpoint(default_weights_path())
     assert net.cfg.arch == "firenet" and extra["e4dgs_training"]["iterations"] > 0
-    cfg = SynthConfig(height=64, width=80, n_steps=12)
-    trained = evaluate_heldout(net, n_sequences=3, cfg=cfg, skip=3)
+    cfg = SynthConfig(height=64, width=80, n_steps=16)
+    trained = evaluate_heldout(net, n_sequences=3, cfg=cfg, skip=4)
     for seed in range(3):      # untrained networks give flat or unrelated images: no correlation
         torch.manual_seed(seed)
-        untrained = evaluate_heldout(build_network(net.cfg), n_sequences=3, cfg=cfg, skip=3)
+        untrained = evaluate_heldout(build_network(net.cfg), n_sequences=3, cfg=cfg, skip=4)
         assert trained["network"]["corr"] > untrained["network"]["corr"] + 0.3
-    assert trained["network"]["corr"] > 0.5
+        assert trained["network_corrected"]["ssim"] > untrained["network_corrected"]["ssim"] + 0.1
+    assert trained["network"]["corr"] > 0.5       # measured 0.64 (the high-pass filter: 0.72 on these clips)
 
 
 def test_correlation_ignores_gain_and_offset():
