@@ -14,20 +14,13 @@ from typing import Any, Literal, Mapping
 
 import yaml
 
-from e4dgs.config import ConfigError, from_dict
+from e4dgs.config import ConfigError, check_positive, from_dict
 from simulator.config import SimulatorConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = ROOT / "blender_scenes"
 PRESETS_DIR = ROOT / "configs"
 SCENE_NAMES = ("lego", "rubiks_cube", "mc_toy", "hinge", "cubes", "capsule", "restroom", "garage")
-
-
-def _positive(obj, *names):
-    for name in names:
-        value = getattr(obj, name)
-        if not value > 0:
-            raise ConfigError(f"{name}: expected a positive number, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -41,7 +34,7 @@ class RenderConfig:
     height: int = 260
 
     def __post_init__(self):
-        _positive(self, "samples", "fps", "width", "height")
+        check_positive(self, "samples", "fps", "width", "height")
         if self.engine == "workbench" and self.samples not in (1, 5, 8, 11, 16, 32):
             raise ConfigError(f"samples: workbench supports 1, 5, 8, 11, 16 or 32 samples, got {self.samples}")
 
@@ -63,7 +56,7 @@ class CameraRigConfig:
     fov_x_deg: float = 50.0
 
     def __post_init__(self):
-        _positive(self, "n_cameras", "radius", "fov_x_deg")
+        check_positive(self, "n_cameras", "radius", "fov_x_deg")
         if not self.fov_x_deg < 170:
             raise ConfigError(f"fov_x_deg: expected less than 170 degrees, got {self.fov_x_deg}")
         if not self.radius + self.radius_change > 0:
@@ -85,7 +78,7 @@ class LightingConfig:
     exposure: float = 1.0  # linear gain on rendered radiance (a brighter or dimmer scene)
 
     def __post_init__(self):
-        _positive(self, "exposure")
+        check_positive(self, "exposure")
 
 
 @dataclass(frozen=True)
@@ -96,7 +89,7 @@ class FramesConfig:
     test_every: int = 8
 
     def __post_init__(self):
-        _positive(self, "keep_every", "test_every")
+        check_positive(self, "keep_every", "test_every")
 
 
 @dataclass(frozen=True)
@@ -116,7 +109,7 @@ class SceneConfig:
     sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
 
     def __post_init__(self):
-        _positive(self, "duration_s", "motion_strength")
+        check_positive(self, "duration_s", "motion_strength")
         for level, ms in self.blur_ms.items():
             if not ms > 0:
                 raise ConfigError(f"blur_ms.{level}: expected a positive exposure in ms, got {ms!r}")

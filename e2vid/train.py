@@ -43,7 +43,7 @@ from e2vid.evaluate import mean_correlation, monitor_sequences
 from e2vid.networks import FIRENET, NetConfig, build_network
 from e2vid.official import save_checkpoint
 from e2vid.synth import VAL_SEED_BASE, Sequence, SynthConfig, make_batch
-from e4dgs.config import dump_config
+from e4dgs.config import ConfigError, check_positive, dump_config
 from e4dgs.fileio import atomic_output
 
 
@@ -70,6 +70,13 @@ class E2VIDTrainConfig:
     monitor_sequences: int = 4
     monitor_size: tuple[int, int] = (96, 96)   # (height, width) of the monitor clips, 24 steps each
     synth: SynthConfig = field(default_factory=SynthConfig)
+
+    def __post_init__(self):
+        check_positive(self, "iterations", "batch_size", "tbptt", "lr", "checkpoint_every", "threads",
+                       "monitor_sequences")
+        for name in ("lpips_start", "data_workers", "monitor_every"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{name}: expected a value >= 0, got {getattr(self, name)!r}")
 
 
 def net_config(arch: str) -> NetConfig:
@@ -217,9 +224,9 @@ class E2VIDTrainer:
             g["lr"] = self._lr(self.iteration)
         T = batch.voxels.shape[0]
         states, prev, sums = None, None, {"loss": 0.0, "l1": 0.0, "lpips": 0.0, "tc": 0.0}
+        lpips_fn = self.lpips if self.iteration >= c.lpips_start else None
         for t0 in range(0, T, c.tbptt):
             t1 = min(t0 + c.tbptt, T)
-            lpips_fn = self.lpips if self.iteration >= c.lpips_start else None
             loss, parts, states, prev = sequence_loss(self.net, batch, c, lpips_fn, t0, t1, states, prev)
             if not torch.isfinite(loss):
                 raise FloatingPointError(f"non-finite loss at iteration {self.iteration}, steps {t0}-{t1}")

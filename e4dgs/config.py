@@ -26,6 +26,13 @@ class ConfigError(ValueError):
     """A configuration value is missing, unknown, of the wrong type or out of range."""
 
 
+def check_positive(obj, *names: str) -> None:
+    """ConfigError naming the first of `names` whose value on `obj` is not > 0."""
+    for name in names:
+        if not getattr(obj, name) > 0:
+            raise ConfigError(f"{name}: expected a positive value, got {getattr(obj, name)!r}")
+
+
 def _describe(value: Any) -> str:
     return f"{value!r} ({type(value).__name__})"
 

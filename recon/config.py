@@ -16,18 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from e4dgs.config import ConfigError
+from e4dgs.config import ConfigError, check_positive
 
 REFERENCE_ITERATIONS = 40_000
 MIN_DENSIFY_INTERVAL = 10
 MIN_OPACITY_RESET_INTERVAL = 1000
 MIN_WARM_UP = 200
-
-
-def _positive(obj, *names):
-    for name in names:
-        if not getattr(obj, name) > 0:
-            raise ConfigError(f"{name}: expected a positive value, got {getattr(obj, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -45,7 +39,7 @@ class InitConfig:
     seed: int = 0
 
     def __post_init__(self):
-        _positive(self, "n_points_object", "n_points_room")
+        check_positive(self, "n_points_object", "n_points_room")
         if not 0 < self.init_opacity < 1:
             raise ConfigError(f"init_opacity: expected a value in (0, 1), got {self.init_opacity!r}")
         if self.kind == "points" and not self.points_file:
@@ -120,7 +114,7 @@ class TrainConfig:
     snapshots: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0)   # fractions of the budget saved as models
 
     def __post_init__(self):
-        _positive(self, "iterations", "checkpoint_every")
+        check_positive(self, "iterations", "checkpoint_every")
         if not 0 <= self.sh_degree <= 3:
             raise ConfigError(f"sh_degree: expected 0..3, got {self.sh_degree!r}")
         if self.eval_every < 0 or self.eval_max_views < 0:
@@ -197,7 +191,7 @@ class EventConfig:
         lo, hi = self.window_fraction
         if not 0 < lo <= hi <= 1:
             raise ConfigError(f"window_fraction: expected 0 < min <= max <= 1, got {[lo, hi]}")
-        _positive(self, "c_init", "recon_eps", "iip_interval", "iip_times", "max_window_fraction")
+        check_positive(self, "c_init", "recon_eps", "iip_interval", "iip_times", "max_window_fraction")
         if self.noise_sigma < 0 or self.lambda_tv < 0 or self.lambda_recon < 0:
             raise ConfigError("noise_sigma, lambda_tv, lambda_recon: expected values >= 0")
 
@@ -224,7 +218,7 @@ class E4DGSConfig:
     train: TrainConfig = field(default_factory=_e4dgs_train)
 
     def __post_init__(self):
-        _positive(self, "rgb_samples")
+        check_positive(self, "rgb_samples")
 
 
 @dataclass(frozen=True)

@@ -406,3 +406,11 @@ def test_weights_report_lists_the_curve_and_heldout_numbers():
     md = training_report_md("firenet", 100, 600.0, log, held, "arch: firenet\n", "e4dgs train-e2vid")
     assert "iteration 90, the best monitor correlation (0.450)" in md
     assert "17.25" in md and "21.50" in md and "19.75" in md and "10.0 min" in md and "-100 |" in md
+
+
+@pytest.mark.parametrize("key,value", [("tbptt", 0), ("iterations", 0), ("data_workers", -1), ("lpips_start", -5)])
+def test_train_config_rejects_bad_values_naming_the_field(key, value):
+    from e2vid.train import E2VIDTrainConfig
+    from e4dgs.config import ConfigError, build_config
+    with pytest.raises(ConfigError, match=key):
+        build_config(E2VIDTrainConfig, None, {key: value})
