@@ -4,11 +4,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def exposure_frames(exposure_ms: float, fps: float) -> int:
-    """Number of rendered frames one exposure integrates (at least 1)."""
-    return max(1, int(round(exposure_ms * 1e-3 * fps)))
-
-
 def exposure_window(i_center: int, n_frames: int, n_timestamps: int) -> tuple[int, int]:
     """Rendered-frame indices [first, last] of an exposure of n_frames centred on frame i_center,
     shifted (not shortened) to stay inside the clip [0, n_timestamps - 1]."""

@@ -40,11 +40,37 @@ class RenderConfig:
 
 
 @dataclass(frozen=True)
+class ShakeConfig:
+    """High-frequency camera egomotion (a hand-held or robot-mounted rig): each camera rotates about
+    its own axes by a sum of `components` sinusoids per axis, with frequencies drawn log-uniformly in
+    [min_hz, max_hz] (real time, Hz) and random phases, seeded per scene and camera.
+
+    rms_deg is the RMS rotation about the pan and tilt axes; roll gets roll_scale times that.
+    rms_deg: 0 turns shake off.
+    """
+    rms_deg: float = 0.0
+    min_hz: float = 4.0
+    max_hz: float = 25.0
+    components: int = 3
+    roll_scale: float = 0.5
+
+    def __post_init__(self):
+        check_positive(self, "min_hz", "max_hz", "components")
+        if not 0 <= self.rms_deg <= 10:
+            raise ConfigError(f"rms_deg: expected 0 to 10 degrees, got {self.rms_deg!r}")
+        if not self.min_hz <= self.max_hz:
+            raise ConfigError(f"max_hz: expected at least min_hz ({self.min_hz}), got {self.max_hz!r}")
+        if not 0 <= self.roll_scale <= 2:
+            raise ConfigError(f"roll_scale: expected 0 to 2, got {self.roll_scale!r}")
+
+
+@dataclass(frozen=True)
 class CameraRigConfig:
     """Cameras uniformly spaced in azimuth on a spiral around `target`, at constant height.
 
     Camera k starts at azimuth azimuth0_deg + 360 k / n_cameras and turns by sweep_deg over the clip;
     its distance from the vertical axis through the target goes from radius to radius + radius_change.
+    `shake` adds high-frequency rotation about each camera's own axes on top of the look-at pose.
     """
     n_cameras: int = 6
     radius: float = 4.0
@@ -54,6 +80,7 @@ class CameraRigConfig:
     sweep_deg: float = 30.0
     radius_change: float = 0.0
     fov_x_deg: float = 50.0
+    shake: ShakeConfig = field(default_factory=ShakeConfig)
 
     def __post_init__(self):
         check_positive(self, "n_cameras", "radius", "fov_x_deg")
@@ -93,6 +120,40 @@ class FramesConfig:
 
 
 @dataclass(frozen=True)
+class BlurConfig:
+    """Motion-blur levels declared by what they do: level name -> target blur length in pixels.
+
+    The blur length of a blurred frame is the median, over the pixels covered by geometry, of the
+    length of the image path each visible surface point travels during the exposure (computed from
+    the scene geometry and camera poses, `datagen.blur_geometry`). The generator picks, per level,
+    the exposure (a whole number of rendered frames, at most max_exposure_ms and the clip) whose
+    median over every camera and blurred frame is closest to the target; a level whose closest
+    exposure misses the target by more than `tolerance` (relative) is an error, never a clamp.
+    sample_stride_px: the blur length is measured on every n-th pixel in x and y.
+    """
+    target_px: dict[str, float] = field(default_factory=dict)
+    tolerance: float = 0.15
+    max_exposure_ms: float = 40.0
+    sample_stride_px: int = 4
+
+    def __post_init__(self):
+        check_positive(self, "tolerance", "max_exposure_ms", "sample_stride_px")
+        for level, px in self.target_px.items():
+            if not px > 0:
+                raise ConfigError(f"target_px.{level}: expected a positive blur length in pixels, got {px!r}")
+        values = list(self.target_px.values())
+        if len(set(values)) != len(values):
+            raise ConfigError(f"target_px: two levels share a target ({self.target_px})")
+        if not self.tolerance < 1:
+            raise ConfigError(f"tolerance: expected a relative tolerance below 1, got {self.tolerance!r}")
+
+    @property
+    def levels(self) -> list[str]:
+        """Level names from the weakest to the strongest blur."""
+        return sorted(self.target_px, key=self.target_px.get)
+
+
+@dataclass(frozen=True)
 class SceneConfig:
     name: str
     kind: Literal["object", "room"]
@@ -104,15 +165,11 @@ class SceneConfig:
     camera: CameraRigConfig = field(default_factory=CameraRigConfig)
     lighting: LightingConfig = field(default_factory=LightingConfig)
     frames: FramesConfig = field(default_factory=FramesConfig)
-    # motion-blur levels: name -> exposure time in milliseconds (empty: no blurred frames)
-    blur_ms: dict[str, float] = field(default_factory=dict)
+    blur: BlurConfig = field(default_factory=BlurConfig)  # no target_px: no blurred frames
     sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
 
     def __post_init__(self):
         check_positive(self, "duration_s", "motion_strength")
-        for level, ms in self.blur_ms.items():
-            if not ms > 0:
-                raise ConfigError(f"blur_ms.{level}: expected a positive exposure in ms, got {ms!r}")
 
     @property
     def n_timestamps(self) -> int:

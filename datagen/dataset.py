@@ -65,11 +65,12 @@ class SceneDataset:
         return self._read_transforms(self.dir / f"transforms_{split}.json")
 
     def blur_levels(self) -> list[str]:
-        return sorted(self.config.blur_ms)
+        """Blur level names from the weakest to the strongest."""
+        return self.config.blur.levels
 
     def blurred_frames(self, level: str) -> list[FrameRecord]:
         """Training frames of a blur level; their t_us / time is the exposure centre."""
-        if level not in self.config.blur_ms:
+        if level not in self.config.blur.target_px:
             raise DatasetError(f"{self.dir}: no blur level {level!r} (have: {', '.join(self.blur_levels()) or 'none'})")
         exposures = json.loads((self.dir / "blur" / level / "exposures.json").read_text())
         spans = {(e["camera"], e["index"]): (e["first_frame_us"], e["last_frame_us"]) for e in exposures}

@@ -25,12 +25,13 @@ from tqdm import tqdm
 
 import e4dgs
 from datagen import render as R
-from datagen.blur import BlurStack, exposure_frames, exposure_window
-from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, rig_poses
+from datagen.blur import BlurStack
+from datagen.blur_geometry import BlurReport, measure_blur
+from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, scene_poses
 from datagen.config import SceneConfig, load_preset, resolve_scene
-from datagen.preview import contact_sheet
+from datagen.preview import blur_psnr, contact_sheet
 from e4dgs.checkpoint import JobCheckpoint
-from e4dgs.config import dump_config
+from e4dgs.config import ConfigError, dump_config
 from e4dgs.fileio import write_text_atomic
 from e4dgs.imageio import write_exr, write_png_srgb
 from simulator.h5io import read_info, simulator_attrs
@@ -84,11 +85,10 @@ class SceneJob:
         self.t_us = timestamps_us(cfg)
         self.tau = self.t_us / self.t_us[-1] if self.t_us[-1] > 0 else np.zeros(len(self.t_us))
         self.intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
-        self.poses = rig_poses(cfg.camera, self.tau)  # [C, T, 4, 4] OpenCV c2w
+        self.poses = scene_poses(cfg, self.tau)  # [C, T, 4, 4] OpenCV c2w
         self.kept = np.arange(0, cfg.n_timestamps, cfg.frames.keep_every)
-        self.windows = {level: {j: exposure_window(int(i), exposure_frames(ms, cfg.render.fps), cfg.n_timestamps)
-                                for j, i in enumerate(self.kept)}
-                        for level, ms in cfg.blur_ms.items()}
+        self.blur: BlurReport | None = None   # exposures chosen from the scene geometry (run() measures them)
+        self.windows: dict[str, dict[int, tuple[int, int]]] = {}
         self.fingerprint = config_fingerprint(cfg)
 
     # -- files -------------------------------------------------------------------------------
@@ -113,9 +113,12 @@ class SceneJob:
         if self.is_complete():
             print(f"{self.dir}: complete, skipped")
             return self.dir
-        self.dir.mkdir(parents=True, exist_ok=True)
         t_start = time.perf_counter()
         cams = R.build_scene(cfg, self.intr)
+        t_blur = time.perf_counter()
+        self._measure_blur()  # before anything is written: a level out of reach leaves no output behind
+        t_blur = time.perf_counter() - t_blur
+        self.dir.mkdir(parents=True, exist_ok=True)
         renderer = R.ViewRenderer()
         C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
         ckpt = JobCheckpoint(self.dir / ".generate.ckpt.npz", self.fingerprint)
@@ -128,13 +131,14 @@ class SceneJob:
                                      resume_count=int(state[f"n_events_{k}"]) if state else None))
             if state:
                 sims[k].load_state_dict({key[len(f"sim{k}__"):]: v for key, v in state.items() if key.startswith(f"sim{k}__")})
-        stacks = {(level, k): BlurStack(self.windows[level]) for level in cfg.blur_ms for k in range(C)}
+        stacks = {(level, k): BlurStack(self.windows[level]) for level in self.windows for k in range(C)}
         for (level, k), stack in stacks.items():
             stack.load_state(state, f"blur__{level}__{k}__")
         start = int(state.get("next_index", 0))
         if start:
             print(f"{cfg.name}: resuming at timestamp {start} of {cfg.n_timestamps}", flush=True)
-        seconds = {name: float(state.get(f"seconds_{name}", 0.0)) for name in ("render", "simulate", "write", "total")}
+        seconds = {name: float(state.get(f"seconds_{name}", 0.0)) for name in ("blur_geometry", "render", "simulate", "write", "total")}
+        seconds["blur_geometry"] += t_blur
         kept_set = {int(i): j for j, i in enumerate(self.kept)}
         bar = tqdm(range(start, cfg.n_timestamps), desc=cfg.name, unit="ts", initial=start, total=cfg.n_timestamps,
                    disable=not self.progress, dynamic_ncols=True, position=self.position)
@@ -154,7 +158,7 @@ class SceneJob:
                 for k in range(C):
                     if i in kept_set:
                         self._write_kept(k, kept_set[i], frames[k])
-                    for level in cfg.blur_ms:
+                    for level in self.windows:
                         for j, mean in stacks[(level, k)].add(i, frames[k]):
                             write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
                 t3 = time.perf_counter()
@@ -174,6 +178,22 @@ class SceneJob:
         self._write_metadata(seconds)
         ckpt.remove()
         return self.dir
+
+    def _measure_blur(self) -> None:
+        """Pick every blur level's exposure from the scene geometry (datagen.blur_geometry)."""
+        cfg = self.cfg
+        if not cfg.blur.target_px:
+            return
+        from datagen.render_geometry import sample_scene_motion
+
+        mats, samples = sample_scene_motion(self.tau, self.kept, self.poses, self.intr.K, cfg.render.width,
+                                            cfg.render.height, cfg.blur.sample_stride_px)
+        self.blur = measure_blur(samples, mats, self.poses, self.intr.K, self.kept, cfg.blur, cfg.render.fps, cfg.name)
+        self.windows = self.blur.windows
+        levels = ", ".join(f"{c.level} {c.n_frames} frames ({1e3 * c.n_frames / cfg.render.fps:.2f} ms): "
+                           f"{self.blur.manifest['levels'][c.level]['median_px']:.1f} px" for c in self.blur.choices)
+        if self.progress:
+            print(f"{cfg.name}: blur exposures {levels}", flush=True)
 
     def _checkpoint(self, ckpt, next_index, sims, spools, stacks, seconds, t_start) -> None:
         state = {"next_index": next_index}
@@ -202,10 +222,15 @@ class SceneJob:
         self._write_transforms()
         write_text_atomic(d / "scene.yaml", f"# resolved scene config (preset: {self.preset})\n" + dump_config(cfg))
         mid = len(self.kept) // 2
-        level = max(cfg.blur_ms, key=cfg.blur_ms.get) if cfg.blur_ms else None
         window = max(int(round(cfg.frames.keep_every * 1e6 / cfg.render.fps)), 1000)
-        contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, level, d / "preview" / "contact_sheet.png")
+        blur = self.blur.manifest if self.blur else None
+        if blur:
+            for level in self.windows:
+                blur["levels"][level]["psnr_vs_sharp_db"] = blur_psnr(d, level, C, len(self.kept))
+        labels = {level: [f"{m:.1f} px" for m in self.blur.view_median_px[level][:, mid]] for level in self.windows}
+        contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png")
         seconds["write"] += time.perf_counter() - t_write
+        n_events = [read_info(d / "events" / f"cam{k}.h5")["n_events"] for k in range(C)]
         files = sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith(".") and p.name != "manifest.json")
         manifest = {
             "scene": cfg.name, "preset": self.preset, "format_version": FORMAT_VERSION,
@@ -213,7 +238,9 @@ class SceneJob:
             "versions": _versions(), "created_unix": int(time.time()),
             "counts": {"cameras": C, "timestamps": cfg.n_timestamps, "kept_frames_per_camera": len(self.kept),
                        "test_frames_per_camera": int(np.sum(np.arange(len(self.kept)) % cfg.frames.test_every == 0)),
-                       "events_per_camera": [read_info(d / "events" / f"cam{k}.h5")["n_events"] for k in range(C)]},
+                       "events_per_camera": n_events},
+            "events_per_second_per_camera": [round(n / cfg.duration_s) for n in n_events],
+            "blur": blur,
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
             "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": _sha256(p)} for p in files},
         }
@@ -247,7 +274,8 @@ class SceneJob:
                         frames.append(self._frame_entry(k, j, f"./blur/{level}/cam{k}/{j:05d}", t_mid))
                     exposures.append({"camera": k, "index": j, "first_frame_us": int(self.t_us[first]),
                                       "last_frame_us": int(self.t_us[last]), "center_us": t_mid,
-                                      "n_frames": int(last - first + 1), "exposure_ms": cfg.blur_ms[level]})
+                                      "n_frames": int(last - first + 1),
+                                      "exposure_ms": round(1e3 * (last - first + 1) / cfg.render.fps, 4)})
             write_text_atomic(self.dir / "blur" / level / "transforms_train.json", json.dumps({**base, "frames": frames}, indent=1))
             write_text_atomic(self.dir / "blur" / level / "exposures.json", json.dumps(exposures, indent=1))
 
@@ -262,15 +290,13 @@ def main(argv=None) -> int:
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--position", type=int, default=0, help="progress-bar line (when several scenes run side by side)")
     args = ap.parse_args(argv)
-    from e4dgs.config import ConfigError
-
     try:
         preset = load_preset(args.preset)
         cfg = resolve_scene(args.scene, preset.overrides, args.scene_config)
+        SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position).run()
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position).run()
     return 0
 
 

@@ -1,4 +1,8 @@
-"""Contact sheet of a generated scene: per camera a sharp RGB frame, a blurred frame, an event frame."""
+"""Contact sheet of a generated scene and the blurred-vs-sharp PSNR of its blur levels.
+
+The contact sheet has one row per camera: the sharp RGB frame, the same frame at every blur level
+(labelled with its measured blur length), and the events around it.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,8 +10,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from simulator.h5io import read_window
 from e4dgs.imageio import write_png
+from simulator.h5io import read_window
 from simulator.view import event_frame
 
 
@@ -18,18 +22,43 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
     return img
 
 
-def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, window_us: int,
-                  blur_level: str | None, out: Path) -> Path:
-    """Rows: sharp RGB, blurred RGB (if any level), events in [t - w/2, t + w/2); one column per camera."""
-    rows: list[list[np.ndarray]] = [[], [], []]
-    for k in range(n_cameras):
-        sharp = cv2.imread(str(scene_dir / "rgb" / f"cam{k}" / f"{frame_index:05d}.png"))[..., ::-1]
-        rows[0].append(_label(sharp, f"cam{k} rgb"))
-        if blur_level:
-            blurred = cv2.imread(str(scene_dir / "blur" / blur_level / f"cam{k}" / f"{frame_index:05d}.png"))[..., ::-1]
-            rows[1].append(_label(blurred, f"{blur_level} blur"))
-        ev = read_window(scene_dir / "events" / f"cam{k}.h5", t_us - window_us // 2, t_us + window_us // 2)
-        rows[2].append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:g} ms"))
-    grid = np.concatenate([np.concatenate(r, axis=1) for r in rows if r], axis=0)
-    return write_png(out, grid)
+def _rgb(path: Path) -> np.ndarray:
+    img = cv2.imread(str(path))
+    if img is None:
+        raise FileNotFoundError(f"{path}: cannot read image")
+    return img[..., ::-1]
 
+
+def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, window_us: int,
+                  blur_labels: dict[str, list[str]], out: Path) -> Path:
+    """Per camera a row: sharp | each blur level in blur_labels' order (labelled "<level> <label[k]>") |
+    events in [t - w/2, t + w/2)."""
+    rows = []
+    name = f"{frame_index:05d}.png"
+    for k in range(n_cameras):
+        row = [_label(_rgb(scene_dir / "rgb" / f"cam{k}" / name), f"cam{k} sharp")]
+        for level, labels in blur_labels.items():
+            row.append(_label(_rgb(scene_dir / "blur" / level / f"cam{k}" / name), f"{level} {labels[k]}"))
+        ev = read_window(scene_dir / "events" / f"cam{k}.h5", t_us - window_us // 2, t_us + window_us // 2)
+        row.append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:g} ms"))
+        rows.append(np.concatenate(row, axis=1))
+    return write_png(out, np.concatenate(rows, axis=0))
+
+
+def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR (dB) of two images in [0, 1] (inf if identical)."""
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return float("inf") if mse == 0 else 10.0 * np.log10(1.0 / mse)
+
+
+def blur_psnr(scene_dir: Path, level: str, n_cameras: int, n_frames: int) -> dict:
+    """PSNR of every blurred frame of a level against the sharp frame at its kept timestamp (the 8-bit
+    sRGB PNGs that RGB methods train on): median and mean over all frames, median per camera."""
+    per_cam = []
+    for k in range(n_cameras):
+        per_cam.append([psnr_db(_rgb(scene_dir / "blur" / level / f"cam{k}" / f"{j:05d}.png") / 255.0,
+                                _rgb(scene_dir / "rgb" / f"cam{k}" / f"{j:05d}.png") / 255.0) for j in range(n_frames)])
+    allv = np.array([v for c in per_cam for v in c])
+    finite = allv[np.isfinite(allv)]
+    return {"median_db": round(float(np.median(allv)), 3), "mean_db": round(float(finite.mean()), 3) if len(finite) else None,
+            "per_camera_median_db": [round(float(np.median(c)), 3) for c in per_cam]}

@@ -180,10 +180,10 @@ def render_clip(cfg: SceneConfig, tau: np.ndarray, camera_ids=(0,), camera_tau: 
     """
     import time
 
-    from datagen.cameras import intrinsics_from_fov, rig_poses
+    from datagen.cameras import intrinsics_from_fov, scene_poses
 
     cams = build_scene(cfg, intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg))
-    poses = rig_poses(cfg.camera, tau if camera_tau is None else camera_tau)
+    poses = scene_poses(cfg, tau if camera_tau is None else camera_tau)
     renderer = ViewRenderer()
     out = np.empty((len(camera_ids), len(tau), cfg.render.height, cfg.render.width, 3), np.float32)
     seconds = 0.0

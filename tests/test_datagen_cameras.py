@@ -8,6 +8,7 @@ from datagen.cameras import (FLIP_YZ, blender_to_opencv, interpolate_pose, intri
                              opencv_to_blender, project, quat_to_rotmat, rig_poses, rotmat_to_quat, slerp,
                              spiral_positions)
 from datagen.config import CameraRigConfig
+from e4dgs.config import ConfigError
 
 
 def rot_z(deg):
@@ -83,3 +84,32 @@ def test_interpolate_pose_linear_position_and_slerp_rotation():
     np.testing.assert_allclose(batch[1][:3, :3], rot_z(30), atol=1e-12)
     with pytest.raises(ValueError, match="outside the recorded trajectory"):
         interpolate_pose(t, c2w, 3001)
+
+
+def test_shake_is_seeded_has_the_declared_rms_and_keeps_the_target_in_view():
+    from datagen.cameras import shake_angles
+    from datagen.config import ShakeConfig
+
+    shake = ShakeConfig(rms_deg=2.0, min_hz=4.0, max_hz=25.0, components=3, roll_scale=0.5)
+    t = np.arange(0, 20.0, 1 / 3000)
+    a = np.degrees(shake_angles(shake, t, seed=7))
+    np.testing.assert_allclose(np.sqrt(np.mean(a ** 2, axis=0)), [2.0, 2.0, 1.0], rtol=0.05)
+    np.testing.assert_allclose(np.radians(a[:100]), shake_angles(shake, t[:100], 7))     # seeded: the same again
+    assert not np.allclose(shake_angles(shake, t[:100], 8), shake_angles(shake, t[:100], 7))
+    # frequencies inside the band: no power above max_hz
+    spec = np.abs(np.fft.rfft(a[:, 0] * np.hanning(len(t))))   # windowed: no leakage from partial periods
+    freqs = np.fft.rfftfreq(len(t), 1 / 3000)
+    assert spec[freqs > 30].max() < 1e-3 * spec.max() and spec[freqs < 3].max() < 1e-2 * spec.max()
+
+    rig = CameraRigConfig(n_cameras=3, radius=4.0, height=1.5, target=(0.0, 0.0, 0.5), sweep_deg=60.0,
+                          shake=ShakeConfig(rms_deg=1.5))
+    tau = np.linspace(0, 1, 301)
+    calm = rig_poses(CameraRigConfig(n_cameras=3, radius=4.0, height=1.5, target=(0.0, 0.0, 0.5), sweep_deg=60.0), tau)
+    shaken = rig_poses(rig, tau, duration_s=0.5, seed=3)
+    np.testing.assert_allclose(shaken[..., :3, 3], calm[..., :3, 3])           # shake turns, never moves, a camera
+    np.testing.assert_allclose(np.linalg.det(shaken[..., :3, :3]), 1.0)
+    angle = np.degrees(np.arccos(np.clip(np.sum(shaken[..., :3, 2] * calm[..., :3, 2], -1), -1, 1)))
+    assert 0.5 < angle.max() < 12.5                                          # the target stays in view
+    np.testing.assert_array_equal(shaken, rig_poses(rig, tau, duration_s=0.5, seed=3))
+    with pytest.raises(ConfigError, match="camera.shake: camera .* looks .* away from the target"):
+        rig_poses(CameraRigConfig(fov_x_deg=20.0, shake=ShakeConfig(rms_deg=8.0)), tau, duration_s=0.5)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from datagen.blur import BlurStack, exposure_frames, exposure_window
+from datagen.blur import BlurStack, exposure_window
 from datagen.config import SCENE_NAMES, load_preset, resolve_scene
 from e4dgs.config import ConfigError
 
@@ -20,6 +20,17 @@ def test_every_scene_yaml_loads_with_every_preset():
     assert [n for n, k in kinds.items() if k == "room"] == ["capsule", "restroom", "garage"]
 
 
+def test_every_scene_declares_ordered_blur_levels_and_shake():
+    for name in SCENE_NAMES:
+        cfg = resolve_scene(name)
+        assert cfg.blur.levels == ["mild", "medium", "strong"]
+        px = [cfg.blur.target_px[level] for level in cfg.blur.levels]
+        assert px == sorted(px) and cfg.camera.shake.rms_deg > 0
+    for preset in ("tiny", "tiny_motion"):
+        cfg = resolve_scene("cubes", load_preset(preset).overrides)
+        assert cfg.blur.max_exposure_ms <= 1e3 * cfg.duration_s  # every candidate exposure fits in the clip
+
+
 def test_preset_overrides_are_merged_into_the_scene():
     quick = resolve_scene("lego", load_preset("quick").overrides)
     full = resolve_scene("lego")
@@ -31,7 +42,11 @@ def test_preset_overrides_are_merged_into_the_scene():
     ("name: x\nkind: object\nfoo: 1\n", "foo: unknown key"),
     ("name: x\nkind: object\ncamera: {radius: 2, fov: 40}\n", "camera.fov: unknown key"),
     ("name: x\nkind: garden\n", "kind: expected one of"),
-    ("name: x\nkind: object\nblur_ms: {mild: -1}\n", "blur_ms.mild"),
+    ("name: x\nkind: object\nblur: {target_px: {mild: -1}}\n", "blur.target_px.mild"),
+    ("name: x\nkind: object\nblur: {target_px: {mild: 5, medium: 5}}\n", "blur.target_px: two levels share"),
+    ("name: x\nkind: object\nblur_ms: {mild: 2.0}\n", "blur_ms: unknown key"),
+    ("name: x\nkind: object\ncamera: {shake: {rms_deg: 20}}\n", "camera.shake.rms_deg"),
+    ("name: x\nkind: object\ncamera: {shake: {min_hz: 30, max_hz: 10}}\n", "camera.shake.max_hz"),
     ("name: x\nkind: object\nsensor: {pos_threshold: 0}\n", "sensor.pos_threshold"),
     ("name: x\nkind: object\nrender: {engine: workbench, samples: 7}\n", "render.samples"),
 ])
@@ -55,7 +70,6 @@ def test_unknown_scene_and_preset_are_clear_errors(tmp_path):
 
 
 def test_exposure_windows_stay_inside_the_clip():
-    assert exposure_frames(5.0, 3000) == 15 and exposure_frames(0.01, 3000) == 1
     assert exposure_window(50, 15, 301) == (43, 57)
     assert exposure_window(0, 15, 301) == (0, 14)        # shifted, not shortened
     assert exposure_window(300, 15, 301) == (286, 300)

@@ -1,5 +1,6 @@
 """The dataset generator end to end on tiny scenes (Blender in subprocesses), and every scene builder."""
 import json
+import math
 import os
 import signal
 import subprocess
@@ -46,10 +47,10 @@ def test_tiny_scene_layout_is_complete(tiny):
     for k in range(2):
         for sub, ext in (("frames", "exr"), ("rgb", "png"), ("gray", "png")):
             assert len(list((tiny / sub / f"cam{k}").glob(f"*.{ext}"))) == kept
-        for level in cfg.blur_ms:
+        for level in cfg.blur.levels:
             assert len(list((tiny / "blur" / level / f"cam{k}").glob("*.png"))) == kept
     assert manifest["counts"]["timestamps"] == cfg.n_timestamps == 13
-    assert set(manifest["seconds"]) == {"render", "simulate", "write", "total"}
+    assert set(manifest["seconds"]) == {"blur_geometry", "render", "simulate", "write", "total"}
     assert not list(tiny.glob(".*"))  # no spool or checkpoint left behind
     train = json.loads((tiny / "transforms_train.json").read_text())
     test = json.loads((tiny / "transforms_test.json").read_text())
@@ -74,19 +75,72 @@ def test_blurred_frames_are_the_mean_of_their_sharp_frames(tmp_path):
     # keep every rendered frame so the test can average them itself
     preset = tmp_path / "p.yaml"
     preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.004\n  render: {width: 64, height: 48, samples: 5}\n"
-                      "  camera: {n_cameras: 1}\n  frames: {keep_every: 1, test_every: 4}\n  blur_ms: {mild: 1.0, strong: 3.0}\n")
+                      "  camera: {n_cameras: 1}\n  frames: {keep_every: 1, test_every: 4}\n"
+                      "  blur: {target_px: {mild: 2.0, medium: 4.5, strong: 9.0}, max_exposure_ms: 4.0}\n")
     r = generate(tmp_path, preset=str(preset))
     assert r.returncode == 0, r.stderr
     d = tmp_path / "cubes"
     sharp = np.stack([read_exr(d / "frames" / "cam0" / f"{j:05d}.exr") for j in range(13)])
-    for level in ("mild", "strong"):
+    chosen = json.loads((d / "manifest.json").read_text())["blur"]["levels"]
+    for level in ("mild", "medium", "strong"):
         for e in json.loads((d / "blur" / level / "exposures.json").read_text()):
             first, last = round(e["first_frame_us"] * 3e-3), round(e["last_frame_us"] * 3e-3)
-            assert last - first + 1 == e["n_frames"] == {"mild": 3, "strong": 9}[level]
+            assert last - first + 1 == e["n_frames"] == chosen[level]["n_frames"] > 1
             expected = linear_to_srgb(sharp[first:last + 1].astype(np.float64).mean(0))
             got = cv2.imread(str(d / "blur" / level / "cam0" / f"{e['index']:05d}.png"))[..., ::-1] / 255.0
             # 8-bit output and half-float sharp frames: within 1.5 grey levels
             assert np.abs(got - expected).max() <= 1.5 / 255
+
+
+def test_tiny_preset_blur_levels_are_ordered_and_inside_the_clip(tiny):
+    manifest = json.loads((tiny / "manifest.json").read_text())
+    levels = manifest["blur"]["levels"]
+    assert list(levels) == ["mild", "medium", "strong"]
+    for key in ("target_px", "n_frames", "median_px", "p90_px"):
+        values = [levels[name][key] for name in levels]
+        assert values == sorted(values) and len(set(values)) == 3, key
+    psnr = [levels[name]["psnr_vs_sharp_db"]["median_db"] for name in levels]
+    assert psnr == sorted(psnr, reverse=True)       # more blur, further from the sharp frame
+    for name, level in levels.items():
+        assert abs(level["median_px"] / level["target_px"] - 1) <= manifest["blur"]["tolerance"]
+        assert level["n_frames"] <= manifest["counts"]["timestamps"]
+        for e in json.loads((tiny / "blur" / name / "exposures.json").read_text()):
+            assert 0 <= e["first_frame_us"] <= e["center_us"] <= e["last_frame_us"] <= 4000
+    assert len(manifest["events_per_second_per_camera"]) == 2
+
+
+def test_blur_length_of_a_sliding_board_is_the_analytic_one(tmp_path):
+    """A board slides sideways at constant speed before a fixed camera: every visible point moves
+    fx * v / Z px per second, so an exposure of n rendered frames blurs fx * v * (n - 1) / (fps * Z) px."""
+    from blender_scenes import blur_plane as B
+    from datagen.cameras import intrinsics_from_fov
+
+    yaml_path = ROOT / "blender_scenes" / "blur_plane.yaml"
+    r = generate(tmp_path, scene="blur_plane", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+                 extra=["--scene-config", str(yaml_path)])
+    assert r.returncode == 0, r.stderr
+    cfg = resolve_scene("blur_plane", scene_file=yaml_path)
+    fx = intrinsics_from_fov(64, 48, 50.0).fx
+    px_per_frame = fx * (B.TRAVEL_M / cfg.duration_s) / (cfg.render.fps * B.FRONT_DEPTH_M)
+    blur = json.loads((tmp_path / "blur_plane" / "manifest.json").read_text())["blur"]
+    for name, level in blur["levels"].items():
+        target = cfg.blur.target_px[name]
+        n_best = min(range(2, 40), key=lambda n: abs(math.log((n - 1) * px_per_frame / target)))
+        assert level["n_frames"] == n_best
+        assert level["median_px"] == pytest.approx((n_best - 1) * px_per_frame, rel=2e-3)
+        assert level["p90_px"] == pytest.approx(level["median_px"], rel=2e-3)
+        assert level["per_camera"][0]["samples"] == 16 * 12 * 7      # every sample hits the board; 7 blurred frames
+    assert blur["px_per_frame"]["median"] == pytest.approx(px_per_frame, rel=2e-3)
+
+
+def test_a_blur_level_out_of_reach_is_refused_and_writes_nothing(tmp_path):
+    bad = tmp_path / "plane.yaml"
+    bad.write_text((ROOT / "blender_scenes" / "blur_plane.yaml").read_text().replace("strong: 9.0", "strong: 90.0"))
+    r = generate(tmp_path / "out", scene="blur_plane", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+                 extra=["--scene-config", str(bad)])
+    assert r.returncode == 2, r.stderr
+    assert "scene blur_plane, blur level strong: target 90 px cannot be reached" in r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "out").exists()
 
 
 def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
@@ -122,7 +176,8 @@ def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
 def test_killed_run_resumes_to_identical_files(tmp_path):
     preset = tmp_path / "p.yaml"
     preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.03\n  render: {width: 64, height: 48, samples: 1}\n"
-                      "  camera: {n_cameras: 2}\n  frames: {keep_every: 10, test_every: 2}\n  blur_ms: {strong: 3.0}\n"
+                      "  camera: {n_cameras: 2}\n  frames: {keep_every: 10, test_every: 2}\n"
+                      "  blur: {target_px: {mild: 1.0, medium: 2.5, strong: 5.0}, max_exposure_ms: 10.0}\n"
                       "  sensor: {shot_noise_rate_hz: 50.0, refractory_us: 40}\n")
     assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
     cmd = [sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(preset),
