@@ -57,6 +57,11 @@ def run_dataset(args: argparse.Namespace) -> int:
                     failed.append(scene)
         time.sleep(0.2)
     print(f"dataset: {len(scenes) - len(failed)} of {len(scenes)} scene(s) done in {time.time() - t0:.0f} s -> {out}")
+    done = [s for s in scenes if s not in failed]
+    if done and out.is_dir():
+        from datagen.summary import blur_table
+
+        print("\nblur levels (median blur length over geometry; PSNR of blurred vs sharp frames):\n" + blur_table(out, done))
     if failed:
         print(f"dataset: failed: {', '.join(failed)} (run again to resume them)", file=sys.stderr)
         return 1

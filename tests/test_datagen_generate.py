@@ -251,3 +251,14 @@ def test_dataset_reader_on_the_tiny_scene(tiny, tmp_path):
         ds.blurred_frames("huge")
     with pytest.raises(DatasetError, match="no manifest.json"):
         SceneDataset(tmp_path)
+
+
+def test_dataset_command_prints_the_blur_levels_it_measured(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "dataset", "--preset", "tiny", "--out", str(tmp_path)],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    levels = json.loads((tmp_path / "cubes" / "manifest.json").read_text())["blur"]["levels"]
+    for name, level in levels.items():
+        row = next(line for line in r.stdout.splitlines() if line.startswith(f"| cubes | {name} |"))
+        assert f"{level['median_px']:.1f} / {level['p90_px']:.1f}" in row
+        assert f"{level['psnr_vs_sharp_db']['median_db']:.1f}" in row
