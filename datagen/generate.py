@@ -184,10 +184,13 @@ class SceneJob:
         cfg = self.cfg
         if not cfg.blur.target_px:
             return
-        from datagen.render_geometry import sample_scene_motion
+        from datagen.render_geometry import RigidMotionError, sample_scene_motion
 
-        mats, samples = sample_scene_motion(self.tau, self.kept, self.poses, self.intr.K, cfg.render.width,
-                                            cfg.render.height, cfg.blur.sample_stride_px)
+        try:
+            mats, samples = sample_scene_motion(self.tau, self.kept, self.poses, self.intr.K, cfg.render.width,
+                                                cfg.render.height, cfg.blur.sample_stride_px)
+        except RigidMotionError as exc:
+            raise RigidMotionError(f"scene {cfg.name}: {exc}") from None
         self.blur = measure_blur(samples, mats, self.poses, self.intr.K, self.kept, cfg.blur, cfg.render.fps, cfg.name)
         self.windows = self.blur.windows
         levels = ", ".join(f"{c.level} {c.n_frames} frames ({1e3 * c.n_frames / cfg.render.fps:.2f} ms): "

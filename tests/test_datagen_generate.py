@@ -262,3 +262,11 @@ def test_dataset_command_prints_the_blur_levels_it_measured(tmp_path):
         row = next(line for line in r.stdout.splitlines() if line.startswith(f"| cubes | {name} |"))
         assert f"{level['median_px']:.1f} / {level['p90_px']:.1f}" in row
         assert f"{level['psnr_vs_sharp_db']['median_db']:.1f}" in row
+
+
+def test_a_deforming_mesh_is_refused_by_the_blur_measurement(tmp_path):
+    r = generate(tmp_path / "out", scene="deforming", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+                 extra=["--scene-config", str(ROOT / "blender_scenes" / "deforming.yaml")])
+    assert r.returncode == 2, r.stderr
+    assert "scene deforming: part 'board' deforms" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "out").exists()
