@@ -115,7 +115,6 @@ class LevelChoice:
     level: str
     target_px: float
     n_frames: int
-    median_px: float       # of the chosen exposure over every camera and blurred frame (histogram estimate)
 
 
 def choose_exposures(medians_px: np.ndarray, target_px: dict[str, float], tolerance: float, fps: float,
@@ -146,7 +145,7 @@ def choose_exposures(medians_px: np.ndarray, target_px: dict[str, float], tolera
         if out and out[-1].n_frames == n:
             raise ConfigError(f"scene {scene}, blur levels {out[-1].level} and {level}: targets {out[-1].target_px:g} "
                               f"and {target:g} px fall on the same exposure ({n} frames): the levels would be identical")
-        out.append(LevelChoice(level, float(target), n, got))
+        out.append(LevelChoice(level, float(target), n))
     return out
 
 
@@ -199,6 +198,9 @@ def measure_blur(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndarr
         step.append(cum[b] - cum[a])
     choices = choose_exposures(hist.quantile(0.5), blur_cfg.target_px, blur_cfg.tolerance, fps, scene, limit)
 
+    # Second pass: the exact statistics of the chosen exposures. Each view's paths are recomputed
+    # rather than kept from the first pass, which would hold every view's [2 n_max + 1, N] array
+    # (~2 GB for a quick room scene); recomputing costs the first pass's time again.
     per_cam = {(c.level, k): [] for c in choices for k in range(C)}
     view_median = {c.level: np.full((C, J), np.nan) for c in choices}
     for (k, j), (local, obj) in samples.items():

@@ -193,10 +193,11 @@ class SceneJob:
             raise RigidMotionError(f"scene {cfg.name}: {exc}") from None
         self.blur = measure_blur(samples, mats, self.poses, self.intr.K, self.kept, cfg.blur, cfg.render.fps, cfg.name)
         self.windows = self.blur.windows
-        levels = ", ".join(f"{c.level} {c.n_frames} frames ({1e3 * c.n_frames / cfg.render.fps:.2f} ms): "
-                           f"{self.blur.manifest['levels'][c.level]['median_px']:.1f} px" for c in self.blur.choices)
         if self.progress:
-            print(f"{cfg.name}: blur exposures {levels}", flush=True)
+            levels = self.blur.manifest["levels"]
+            print(f"{cfg.name}: blur exposures " + ", ".join(
+                f"{name} {lv['n_frames']} frames ({lv['exposure_ms']:.2f} ms): {lv['median_px']:.1f} px"
+                for name, lv in levels.items()), flush=True)
 
     def _checkpoint(self, ckpt, next_index, sims, spools, stacks, seconds, t_start) -> None:
         state = {"next_index": next_index}

@@ -10,7 +10,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from datagen.dataset import SceneDataset
 from e4dgs.imageio import write_png
+from e4dgs.metrics import psnr
 from simulator.h5io import read_window
 from simulator.view import event_frame
 
@@ -22,11 +24,9 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
     return img
 
 
-def _rgb(path: Path) -> np.ndarray:
-    img = cv2.imread(str(path))
-    if img is None:
-        raise FileNotFoundError(f"{path}: cannot read image")
-    return img[..., ::-1]
+def _rgb8(path: Path) -> np.ndarray:
+    """uint8 RGB [H, W, 3] of a stored sRGB PNG (exact: the reader returns k / 255)."""
+    return np.round(SceneDataset.load_image(path) * 255.0).astype(np.uint8)
 
 
 def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, window_us: int,
@@ -36,19 +36,13 @@ def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, 
     rows = []
     name = f"{frame_index:05d}.png"
     for k in range(n_cameras):
-        row = [_label(_rgb(scene_dir / "rgb" / f"cam{k}" / name), f"cam{k} sharp")]
+        row = [_label(_rgb8(scene_dir / "rgb" / f"cam{k}" / name), f"cam{k} sharp")]
         for level, labels in blur_labels.items():
-            row.append(_label(_rgb(scene_dir / "blur" / level / f"cam{k}" / name), f"{level} {labels[k]}"))
+            row.append(_label(_rgb8(scene_dir / "blur" / level / f"cam{k}" / name), f"{level} {labels[k]}"))
         ev = read_window(scene_dir / "events" / f"cam{k}.h5", t_us - window_us // 2, t_us + window_us // 2)
         row.append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:g} ms"))
         rows.append(np.concatenate(row, axis=1))
     return write_png(out, np.concatenate(rows, axis=0))
-
-
-def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR (dB) of two images in [0, 1] (inf if identical)."""
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return float("inf") if mse == 0 else 10.0 * np.log10(1.0 / mse)
 
 
 def blur_psnr(scene_dir: Path, level: str, n_cameras: int, n_frames: int) -> dict:
@@ -56,8 +50,9 @@ def blur_psnr(scene_dir: Path, level: str, n_cameras: int, n_frames: int) -> dic
     sRGB PNGs that RGB methods train on): median and mean over all frames, median per camera."""
     per_cam = []
     for k in range(n_cameras):
-        per_cam.append([psnr_db(_rgb(scene_dir / "blur" / level / f"cam{k}" / f"{j:05d}.png") / 255.0,
-                                _rgb(scene_dir / "rgb" / f"cam{k}" / f"{j:05d}.png") / 255.0) for j in range(n_frames)])
+        per_cam.append([psnr(SceneDataset.load_image(scene_dir / "blur" / level / f"cam{k}" / f"{j:05d}.png"),
+                             SceneDataset.load_image(scene_dir / "rgb" / f"cam{k}" / f"{j:05d}.png"))
+                        for j in range(n_frames)])
     allv = np.array([v for c in per_cam for v in c])
     finite = allv[np.isfinite(allv)]
     return {"median_db": round(float(np.median(allv)), 3), "mean_db": round(float(finite.mean()), 3) if len(finite) else None,

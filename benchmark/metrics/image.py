@@ -12,7 +12,7 @@ from typing import Iterable
 import numpy as np
 from skimage.metrics import structural_similarity
 
-from recon.evaluate import psnr
+from e4dgs.metrics import psnr
 
 
 def ssim(pred: np.ndarray, ref: np.ndarray) -> float:
