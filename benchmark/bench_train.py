@@ -1,100 +1,282 @@
-"""Training iterations per second of D3DGS at a scene's resolution (default: a quick-preset scene).
+"""Training iterations per second of every method at a scene's resolution, with a per-part breakdown.
 
-    python -m benchmark.bench_train [--scene data/quick/lego] [--counts 5000 20000 50000] [--iters 20] [--threads N]
+    python -m benchmark.bench_train [--scene data/quick/hinge] [--methods e4dgs e4dgs_rgb d3dgs]
+                                    [--gaussians 20000] [--iters 12] [--threads 1] [--against REV]
 
-For each Gaussian count, times full iterations (render, L1 + D-SSIM, backward, Adam step) in three
-modes, alternated in one run: static (warm-up: no deformation), deformed with the MLP in float32,
-and deformed under bfloat16 autocast. Prints medians in ms/iteration and iterations per second.
-The model is the method's initial one (random points in a cube, opacity 0.1: a fog that covers
-the image, so the rasterizer's share is larger than in a trained model) or, with --model, a
-trained one. Learning rates are 0, so the model stays the same across the timed iterations, and
-every mode renders the same view in a round.
+Each method runs its quick-bench config (configs/recon/bench/) with N initial Gaussians and the
+deformation on, in two states:
+- early: the method's random initial model (a haze whose footprints cover the image: the slowest
+  part of training for the rasterizer);
+- late: that model after intensity-importance pruning (max alpha x transmittance over the training
+  cameras at 5 times < 0.015), what training keeps after its first IIP round.
+Learning rates are 0, so every timed iteration costs what a training one does but the model stays
+the same. Each part is timed inside the real iterations: rasterizer forward and backward (the
+projection included), deformation MLP forward and backward (from the first gradient reaching its
+outputs until its first layer has been differentiated: autograd runs one render's nodes at a time,
+so the intervals do not overlap), and the rest (SH colours, losses, event maps, Adam).
+
+`--against REV` times a git revision's tree side by side: each tree runs in its own worker process
+(PYTHONPATH set to that tree) and the driver alternates single iterations between them, so machine
+stalls hit both alike and the speed-up ratio comes from one run. Medians throughout.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
+import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
+from pathlib import Path
 
-import torch
-
-import recon
-from datagen.dataset import SceneDataset
-from recon.methods import get_method
-from recon.trainer import Trainer
+PARTS = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd")
+CONFIGS = {"d3dgs": "configs/recon/bench/d3dgs_quick.yaml", "e4dgs": "configs/recon/bench/e4dgs_quick.yaml",
+           "e4dgs_rgb": "configs/recon/bench/e4dgs_quick.yaml"}
+REPO = Path(__file__).resolve().parents[1]
 
 
-def make_trainer(scene, n: int, out: str) -> Trainer:
-    cfg = recon.resolve_config("d3dgs", overrides={"train.init.n_points_object": n, "train.init.n_points_room": n})
-    trainer = Trainer(get_method("d3dgs")(SceneDataset(scene), cfg), out, progress=False)
+# -- worker: runs inside one source tree ------------------------------------------------------------
+class Clock:
+    """Per-part seconds of the current iteration, filled by the wrappers below."""
+
+    def __init__(self):
+        self.parts = dict.fromkeys(PARTS, 0.0)
+        self.mlp_started: dict[int, float] = {}
+
+    def add(self, part: str, seconds: float) -> None:
+        self.parts[part] += seconds
+
+
+def instrument(clock: Clock) -> None:
+    """Wrap the cpu backend's autograd Functions and the deformation field with timers."""
+    import torch
+
+    import recon.raster.cpu as cpu
+    from recon.deform import DeformationField
+
+    for obj in list(vars(cpu).values()):
+        if isinstance(obj, type) and issubclass(obj, torch.autograd.Function) and obj is not torch.autograd.Function:
+            for name, part in (("forward", "raster_fwd"), ("backward", "raster_bwd")):
+                fn = obj.__dict__[name].__func__ if isinstance(obj.__dict__[name], staticmethod) else obj.__dict__[name]
+
+                def timed(*a, _fn=fn, _part=part, **k):
+                    t0 = time.perf_counter()
+                    out = _fn(*a, **k)
+                    clock.add(_part, time.perf_counter() - t0)
+                    return out
+                setattr(obj, name, staticmethod(timed))
+
+    forward = DeformationField.forward
+
+    def timed_forward(self, x, t):
+        t0 = time.perf_counter()
+        outs = forward(self, x, t)
+        clock.add("mlp_fwd", time.perf_counter() - t0)
+        if torch.is_grad_enabled() and outs[0].requires_grad:
+            key = id(outs[0])
+
+            def started(grad):
+                clock.mlp_started.setdefault(key, time.perf_counter())
+            for o in outs:
+                o.register_hook(started)
+            first = _first_layer_node(outs[0].grad_fn, self.layers[0].weight)
+            if first is not None:
+                def finished(*_):
+                    begin = clock.mlp_started.pop(key, None)
+                    if begin is not None:
+                        clock.add("mlp_bwd", time.perf_counter() - begin)
+                first.register_hook(finished)
+        return outs
+    DeformationField.forward = timed_forward
+
+
+def _first_layer_node(root, weight):
+    """The autograd node that consumes the first layer's weight (possibly through a dtype cast)."""
+    seen, stack = set(), [root]
+    while stack:
+        node = stack.pop()
+        if node is None or id(node) in seen:
+            continue
+        seen.add(id(node))
+        for nxt, _ in node.next_functions:
+            if nxt is None:
+                continue
+            if getattr(nxt, "variable", None) is weight:
+                return node
+            if type(nxt).__name__.startswith("ToCopy") and any(getattr(n, "variable", None) is weight
+                                                               for n, _ in nxt.next_functions if n is not None):
+                return node
+            stack.append(nxt)
+    return None
+
+
+def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
+    import numpy as np
+    import torch
+
+    import recon
+    from datagen.dataset import SceneDataset
+    from recon.methods import get_method
+    from recon.trainer import Trainer
+    from recon.views import dataset_camera
+
+    key = "n_points_object"
+    cfg = recon.resolve_config(method, str(REPO_OF_TREE / CONFIGS[method]),
+                               overrides={f"train.init.{key}": n, "train.init.n_points_room": n})
+    ds = SceneDataset(scene)
+    trainer = Trainer(get_method(method)(ds, cfg), out, progress=False)
     trainer.setup()
+    model = trainer.model
+    if phase == "late":
+        with torch.no_grad():
+            w = torch.zeros(len(model))
+            for k in range(ds.n_cameras):
+                for t in np.linspace(0.0, 1.0, 5):
+                    cam = dataset_camera(ds, k, int(round(t * ds.duration_us)))
+                    w = torch.maximum(w, model.render_output(cam, float(t), "cpu").max_weight)
+        model.gaussians.prune(w >= 0.015)
+        trainer.optimizer = trainer._optimizer()
+    for group in trainer.optimizer.param_groups:
+        group["lr"] = 0.0
+    model.meta.deform_enabled = True
     return trainer
 
 
-def freeze(trainer: Trainer) -> None:
-    """Learning rates 0: every iteration costs what a training one does, but the model stays fixed."""
-    for group in trainer.optimizer.param_groups:
-        group["lr"] = 0.0
+def one_iteration(trainer, clock: Clock) -> dict:
+    import torch
 
-
-def one_iteration(trainer: Trainer, deform: bool, bf16: bool, view: int) -> float:
-    trainer.model.meta.deform_enabled = deform
-    trainer.model.meta.deform_bf16 = bf16
-    trainer._order = [view]
+    clock.parts = dict.fromkeys(PARTS, 0.0)
+    clock.mlp_started.clear()
     t0 = time.perf_counter()
-    loss, _ = trainer.method.step(trainer, 1)
+    loss, _ = trainer.method.step(trainer, trainer.tcfg.iterations)
     loss.backward()
     with torch.no_grad():
         trainer.optimizer.step()
         trainer.optimizer.zero_grad(set_to_none=True)
-    return time.perf_counter() - t0
+    total = time.perf_counter() - t0
+    return {"total": total, **clock.parts}
 
 
-def main() -> None:
+def worker(threads: int) -> None:
+    """Read commands (JSON lines) on stdin, answer on stdout: {"setup": ...} then {"iterate": k}."""
+    import numba
+    import torch
+
+    torch.set_num_threads(threads)
+    numba.set_num_threads(threads)
+    clock = Clock()
+    instrument(clock)
+    trainer = None
+    tmp = tempfile.TemporaryDirectory()
+    for line in sys.stdin:
+        cmd = json.loads(line)
+        if "setup" in cmd:
+            trainer = build_trainer(cmd["scene"], cmd["setup"], cmd["gaussians"], cmd["phase"],
+                                    tempfile.mkdtemp(dir=tmp.name))
+            one_iteration(trainer, clock)            # compile / warm caches
+            import recon
+            reply = {"gaussians": len(trainer.model), "recon": recon.__file__}
+        else:
+            reply = one_iteration(trainer, clock)
+        print(json.dumps(reply), flush=True)
+
+
+# -- driver -----------------------------------------------------------------------------------------
+class Tree:
+    def __init__(self, label: str, root: Path, threads: int):
+        env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
+                   NUMBA_NUM_THREADS=str(max(threads, 1)), E4DGS_BENCH_TREE=str(root),
+                   NUMBA_CACHE_DIR=str(root / ".numba-cache"))
+        self.label, self.root = label, root
+        # this file runs in every tree (-P: its own folder stays off sys.path, the tree's packages are found)
+        self.proc = subprocess.Popen([sys.executable, "-P", __file__, "--worker", str(threads)], cwd=root, env=env,
+                                     text=True, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+
+    def ask(self, cmd: dict) -> dict:
+        self.proc.stdin.write(json.dumps(cmd) + "\n")
+        self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError(f"bench_train: the worker of {self.label} ({self.root}) died")
+        return json.loads(line)
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+@contextlib.contextmanager
+def checkout(rev: str):
+    """The tree of git revision `rev` in a temporary folder (git archive: no working-tree changes)."""
+    with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
+        archive = subprocess.run(["git", "-C", str(REPO), "archive", rev], check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        yield Path(tmp)
+
+
+def fmt_row(label: str, method: str, phase: str, n: int, rows: list[dict]) -> str:
+    med = {k: statistics.median(r[k] for r in rows) for k in ("total",) + PARTS}
+    rest = max(med["total"] - sum(med[p] for p in PARTS), 0.0)
+    parts = " | ".join(f"{1e3 * med[p]:.0f}" for p in PARTS)
+    return (f"| {method} | {phase} | {label} | {n:,} | {1e3 * med['total']:.0f} | {1 / med['total']:.2f} | "
+            f"{parts} | {1e3 * rest:.0f} |")
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", default="data/quick/lego")
-    ap.add_argument("--counts", type=int, nargs="+", default=[5000, 20000, 50000])
-    ap.add_argument("--iters", type=int, default=20)
-    ap.add_argument("--threads", type=int, default=0, help="torch and numba threads (0: leave as is)")
-    ap.add_argument("--model", default=None, help="time a trained model (model.pt) instead of the initial fog")
-    args = ap.parse_args()
-    if args.threads:
-        import numba
+    ap.add_argument("--scene", default="data/quick/hinge")
+    ap.add_argument("--methods", nargs="+", default=["e4dgs", "e4dgs_rgb", "d3dgs"], choices=sorted(CONFIGS))
+    ap.add_argument("--phases", nargs="+", default=["early", "late"], choices=["early", "late"])
+    ap.add_argument("--gaussians", type=int, default=20000, help="initial Gaussians (before pruning)")
+    ap.add_argument("--iters", type=int, default=12, help="timed iterations per cell and tree")
+    ap.add_argument("--threads", type=int, default=1, help="torch and numba threads of each worker")
+    ap.add_argument("--against", default=None, metavar="REV", help="also time this git revision's tree")
+    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker is not None:
+        worker(args.worker)
+        return 0
+    scene = str(Path(args.scene).resolve())
+    if not (Path(scene) / "manifest.json").exists():
+        print(f"bench_train: {args.scene}: no dataset here (make dataset SCENES={Path(scene).name})", file=sys.stderr)
+        return 2
+    with contextlib.ExitStack() as stack:
+        trees = [Tree("this tree", REPO, args.threads)]
+        if args.against:
+            trees.append(Tree(args.against, stack.enter_context(checkout(args.against)), args.threads))
+        print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
+              f"deformation on, median of {args.iters} (ms; it/s)")
+        print("| method | model | tree | Gaussians | ms/it | it/s | raster fwd | raster bwd | MLP fwd | MLP bwd | rest |")
+        print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+        ratios = []
+        for method in args.methods:
+            for phase in args.phases:
+                replies = [t.ask({"setup": method, "phase": phase, "scene": scene, "gaussians": args.gaussians})
+                           for t in trees]
+                for t, r in zip(trees, replies):
+                    if not r["recon"].startswith(str(t.root)):
+                        raise RuntimeError(f"bench_train: the worker of {t.label} imported {r['recon']}")
+                sizes = [r["gaussians"] for r in replies]
+                rows = [[] for _ in trees]
+                for _ in range(args.iters):
+                    for i, t in enumerate(trees):
+                        rows[i].append(t.ask({"iterate": 1}))
+                for t, n, r in zip(trees, sizes, rows):
+                    print(fmt_row(t.label, method, phase, n, r), flush=True)
+                if len(trees) == 2:
+                    new, old = (statistics.median(x["total"] for x in r) for r in rows)
+                    ratios.append((method, phase, old / new))
+        for t in trees:
+            t.close()
+    for method, phase, ratio in ratios:
+        print(f"speed-up of this tree over {args.against}: {method} {phase}: {ratio:.2f}x")
+    return 0
 
-        torch.set_num_threads(args.threads)
-        numba.set_num_threads(args.threads)
-    modes = {"static": (False, False), "deform fp32": (True, False), "deform bf16": (True, True)}
-    intr = SceneDataset(args.scene).intrinsics
-    print(f"D3DGS training iteration, {intr.width}x{intr.height}, torch threads {torch.get_num_threads()}, "
-          f"median of {args.iters} (ms/it, it/s)")
-    print(f"| Gaussians | {' | '.join(modes)} |")
-    print("|---:|" + "---:|" * len(modes))
-    with tempfile.TemporaryDirectory() as tmp:
-        for n in args.counts:
-            trainer = make_trainer(args.scene, n, tmp)
-            if args.model:
-                from recon.model import load
 
-                trained = load(args.model)
-                trainer.model.gaussians, trainer.model.deform = trained.gaussians, trained.deform
-                trainer.optimizer = trainer._optimizer()
-                n = len(trained)
-            freeze(trainer)
-            n_views = len(trainer.method.views)
-            for mode in modes.values():  # compile / warm caches
-                one_iteration(trainer, *mode, 0)
-            times = {name: [] for name in modes}
-            for i in range(args.iters):   # the same view for every mode in a round
-                view = (i * 7) % n_views
-                for name, mode in modes.items():
-                    times[name].append(one_iteration(trainer, *mode, view))
-            cells = []
-            for name in modes:
-                ms = 1000 * statistics.median(times[name])
-                cells.append(f"{ms:.0f} ms, {1000 / ms:.1f} it/s")
-            print(f"| {n:,} | {' | '.join(cells)} |")
-
+REPO_OF_TREE = Path(os.environ.get("E4DGS_BENCH_TREE", REPO))
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

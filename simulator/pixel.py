@@ -40,11 +40,12 @@ def log_response(intensity: np.ndarray, eps: float, out: np.ndarray | None = Non
     return np.log(out, out=out)
 
 
-def linlog_response(intensity: np.ndarray, threshold_dn: float, dn_per_unit: float,
-                    out: np.ndarray | None = None) -> np.ndarray:
+def linlog_response_ref(intensity: np.ndarray, threshold_dn: float, dn_per_unit: float,
+                        out: np.ndarray | None = None) -> np.ndarray:
     """v2e's lin-log in float64: with DN = dn_per_unit * I, DN * log(thr)/thr for DN <= thr, else log(DN).
 
-    Continuous at DN = thr (both sides equal log(thr)); zero at DN = 0.
+    Continuous at DN = thr (both sides equal log(thr)); zero at DN = 0. Readable reference of
+    `linlog_response`.
     """
     dn = np.multiply(intensity, dn_per_unit, dtype=np.float64)
     res = np.log(np.maximum(dn, threshold_dn))
@@ -54,6 +55,43 @@ def linlog_response(intensity: np.ndarray, threshold_dn: float, dn_per_unit: flo
         out[...] = res
         return out
     return res
+
+
+def linlog_response(intensity: np.ndarray, threshold_dn: float, dn_per_unit: float,
+                    out: np.ndarray | None = None, scratch: np.ndarray | None = None) -> np.ndarray:
+    """`linlog_response_ref` in whole-array passes over kept buffers (boolean indexing and fresh
+    arrays cost ~20x a log per frame here). `scratch` [2, *shape] float64 is reused when given.
+
+    For thr > e the two branches meet as a minimum: DN k (k = log(thr)/thr) is the chord through the
+    origin and (thr, log thr), below log(max(DN, thr)) = log(thr) when DN < thr, and above log(DN) when
+    DN > thr because log(x)/x decreases for x > e. So the response is min(log(max(DN, thr)), DN k):
+    equal to the reference except within an ulp at DN == thr, where the two branches agree to an ulp.
+    For thr <= e the branches are blended with 0/1 weights (x * 1 + y * 0 == x: the reference's bits).
+    """
+    shape = np.shape(intensity)
+    private = scratch is None or scratch.shape != (2,) + shape or scratch.dtype != np.float64
+    if private:
+        scratch = np.empty((2,) + shape, np.float64)
+    dn, res = scratch[0], scratch[1]
+    k = math.log(threshold_dn) / threshold_dn
+    np.multiply(intensity, dn_per_unit, out=dn, dtype=np.float64)
+    np.maximum(dn, threshold_dn, out=res)
+    np.log(res, out=res)
+    if threshold_dn > math.e:
+        dn *= k
+        if out is None:
+            out = np.empty(shape, np.float64)
+        return np.minimum(res, dn, out=out, casting="same_kind")
+    high = np.greater(dn, threshold_dn).astype(np.float64)
+    res *= high
+    np.subtract(1.0, high, out=high)
+    dn *= k
+    dn *= high
+    res += dn
+    if out is None:
+        return res if private else res.copy()   # never hand out the caller's scratch
+    out[...] = res
+    return out
 
 
 def intensity01(intensity: np.ndarray) -> np.ndarray:

@@ -112,7 +112,10 @@ class EventSimulator:
         frame_flat = frame_flat.astype(dtype, copy=False)
         if c.log_mode == "log":
             return pixel.log_response(frame_flat, dtype(c.log_eps), out=out)
-        return pixel.linlog_response(frame_flat, c.linlog_threshold_dn, c.linlog_dn_per_unit, out=out)
+        if getattr(self, "_linlog_scratch", None) is None:
+            self._linlog_scratch = np.empty((2, self.n_pixels), np.float64)
+        return pixel.linlog_response(frame_flat, c.linlog_threshold_dn, c.linlog_dn_per_unit, out=out,
+                                     scratch=self._linlog_scratch)
 
     # -- simulation -------------------------------------------------------------------------
     def push(self, frame: np.ndarray, t_us: int) -> np.ndarray:

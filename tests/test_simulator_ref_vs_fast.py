@@ -85,3 +85,30 @@ def test_long_frame_interval_uses_the_merge_sort_path(rng):
     t = np.array([0, 50_000_000, 100_000_000])
     ref = run(SimulatorConfig(), frames, t, "ref")
     assert np.array_equal(ref, run(SimulatorConfig(), frames, t, "fast"))
+
+
+@pytest.mark.parametrize("threshold_dn", [20.0, 2.0])      # the min form (thr > e) and the blend
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_fast_linlog_equals_the_reference(threshold_dn, dtype):
+    from simulator.pixel import linlog_response, linlog_response_ref
+
+    rng = np.random.default_rng(3)
+    inten = (rng.random((26, 35)) ** 3 * 1.5).astype(dtype)
+    inten[0, :5] = 0.0
+    inten[1, :5] = threshold_dn / 255.0                      # on the knee
+    inten[2, :5] = np.nextafter(dtype(threshold_dn / 255.0), dtype(1.0))
+    ref = linlog_response_ref(inten, threshold_dn, 255.0)
+    scratch = np.full((2,) + inten.shape, np.nan)
+    out = np.empty_like(inten)
+    fast = linlog_response(inten, threshold_dn, 255.0, out=out, scratch=scratch)
+    assert fast is out
+    # the min form may differ from the reference by an ulp at DN == thr, nowhere else
+    np.testing.assert_allclose(fast, ref.astype(dtype), rtol=2 * np.finfo(dtype).eps, atol=0)
+    assert np.count_nonzero(fast != ref.astype(dtype)) <= 5
+    assert np.all(fast[0, :5] == 0.0)                        # exactly zero in the dark
+    again = linlog_response(inten, threshold_dn, 255.0, scratch=scratch)
+    assert again.dtype == np.float64
+    np.testing.assert_array_equal(again.astype(dtype), fast)
+    again[...] = -1.0                                        # the result is not the caller's scratch
+    assert not np.shares_memory(again, scratch)
+    np.testing.assert_allclose(linlog_response(inten, threshold_dn, 255.0), ref, rtol=2e-16, atol=0)

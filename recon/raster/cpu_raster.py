@@ -3,12 +3,17 @@
 Same semantics as `ref.py` (per-pixel footprint square, alpha skip and cap, stop before T < 1e-4),
 organised for speed:
 - one global depth sort; tile lists are filled in that order (no per-tile sort);
+- each Gaussian's pixel box is the footprint square cut to the bounding box of the ellipse where
+  its alpha can reach 1/255 (`footprints`, once per render): tiles and rows outside it are never
+  visited (for a haze of opacity 0.1 that box is 2.55 sigma wide instead of 3 sigma);
 - within a tile, Gaussians are visited front to back, and for each only the pixels of each row
   where its alpha can reach 1/255 (the roots of a quadratic, widened by a pixel and then tested
-  exactly per pixel, so the result is the same as testing every pixel);
+  exactly per pixel, so the result is the same as testing every pixel); rows whose pixels have all
+  stopped (transmittance below T_MIN) are skipped without computing their span;
 - per-thread buffers for max_weight and gradients, reduced at the end (no atomics).
 The backward visits each tile's Gaussians back to front with the same row intervals and runs the
-standard reverse compositing recurrence per pixel.
+standard reverse compositing recurrence per pixel, skipping rows where every pixel stopped before
+the current Gaussian.
 """
 from __future__ import annotations
 
@@ -22,35 +27,52 @@ from recon.raster.types import ALPHA_MAX, ALPHA_MIN, T_MIN, TILE
 _opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
-@numba.njit(**_opts)
-def _pixel_range(mx, my, r, width, height):
-    """Pixel index box [u0, u1] x [v0, v1] of the footprint square (empty when u0 > u1)."""
-    u0 = max(int(math.ceil(mx - r - 0.5)), 0)
-    u1 = min(int(math.floor(mx + r - 0.5)), width - 1)
-    v0 = max(int(math.ceil(my - r - 0.5)), 0)
-    v1 = min(int(math.floor(my + r - 0.5)), height - 1)
-    return u0, u1, v0, v1
+@numba.njit(parallel=True, **_opts)
+def footprints(means2d, conics, radii, opacities, width, height):
+    """Pixel boxes [N, 4] (u0, u1, v0, v1; empty when u0 > u1) of the pixels each Gaussian can touch:
+    the footprint square |d| <= radius cut to the bounding box of the ellipse d^T Q d <= 2 log(o / (1/255))
+    (Q the conic) outside which alpha = o exp(-d^T Q d / 2) < 1/255. The ellipse's half-widths are
+    sqrt(k (Q^-1)_xx) and sqrt(k (Q^-1)_yy), widened by 1e-3 px against rounding."""
+    n = means2d.shape[0]
+    boxes = np.empty((n, 4), np.int64)
+    for g in numba.prange(n):
+        boxes[g, 0], boxes[g, 1], boxes[g, 2], boxes[g, 3] = 1, 0, 1, 0
+        op, a, b, c = opacities[g], conics[g, 0], conics[g, 1], conics[g, 2]
+        r = float(radii[g])
+        if radii[g] <= 0 or not (op >= ALPHA_MIN and a > 0.0):
+            continue
+        hx = hy = r
+        det = a * c - b * b
+        if det > 0.0:
+            k = 2.0 * math.log(op / ALPHA_MIN)
+            hx = min(r, math.sqrt(k * c / det) + 1e-3)
+            hy = min(r, math.sqrt(k * a / det) + 1e-3)
+        mx, my = means2d[g, 0], means2d[g, 1]
+        u0 = max(int(math.ceil(mx - hx - 0.5)), 0)
+        u1 = min(int(math.floor(mx + hx - 0.5)), width - 1)
+        v0 = max(int(math.ceil(my - hy - 0.5)), 0)
+        v1 = min(int(math.floor(my + hy - 0.5)), height - 1)
+        if u0 <= u1 and v0 <= v1:
+            boxes[g, 0], boxes[g, 1], boxes[g, 2], boxes[g, 3] = u0, u1, v0, v1
+    return boxes
 
 
 @numba.njit(**_opts)
-def _tile_range(g, means2d, radii, width, height):
-    """Tiles [tx0, tx1] x [ty0, ty1] touched by Gaussian g's footprint (empty when tx0 > tx1)."""
-    if radii[g] <= 0:
+def _tile_range(g, boxes):
+    """Tiles [tx0, tx1] x [ty0, ty1] touched by Gaussian g's pixel box (empty when tx0 > tx1)."""
+    if boxes[g, 0] > boxes[g, 1]:
         return 1, 0, 1, 0
-    u0, u1, v0, v1 = _pixel_range(means2d[g, 0], means2d[g, 1], radii[g], width, height)
-    if u0 > u1 or v0 > v1:
-        return 1, 0, 1, 0
-    return u0 // TILE, u1 // TILE, v0 // TILE, v1 // TILE
+    return boxes[g, 0] // TILE, boxes[g, 1] // TILE, boxes[g, 2] // TILE, boxes[g, 3] // TILE
 
 
 @numba.njit(**_opts)
-def bin_tiles(means2d, radii, order, width, height):
-    """CSR tile lists: Gaussians overlapping each tile, in `order` (front to back)."""
+def bin_tiles(boxes, order, width, height):
+    """CSR tile lists: Gaussians whose pixel box overlaps each tile, in `order` (front to back)."""
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
     counts = np.zeros(tiles_x * tiles_y + 1, np.int64)
     for g in order:
-        tx0, tx1, ty0, ty1 = _tile_range(g, means2d, radii, width, height)
+        tx0, tx1, ty0, ty1 = _tile_range(g, boxes)
         for ty in range(ty0, ty1 + 1):
             for tx in range(tx0, tx1 + 1):
                 counts[ty * tiles_x + tx + 1] += 1
@@ -59,7 +81,7 @@ def bin_tiles(means2d, radii, order, width, height):
     fill = counts[:-1].copy()
     lists = np.empty(counts[-1], np.int64)
     for g in order:
-        tx0, tx1, ty0, ty1 = _tile_range(g, means2d, radii, width, height)
+        tx0, tx1, ty0, ty1 = _tile_range(g, boxes)
         for ty in range(ty0, ty1 + 1):
             for tx in range(tx0, tx1 + 1):
                 t = ty * tiles_x + tx
@@ -69,23 +91,21 @@ def bin_tiles(means2d, radii, order, width, height):
 
 
 @numba.njit(**_opts)
-def _gaussian_setup(mx, my, a, b, c, opacity, r):
-    """Per-Gaussian constants of the row scan: footprint columns, quadratic coefficients.
+def _gaussian_setup(a, b, c, opacity):
+    """Per-Gaussian constants of the row scan: the quadratic's coefficients.
 
     Alpha can reach 1/255 where power >= pmin = log(1 / (255 opacity)); for a row at offset dy that
     is a dx^2 + 2 b dy dx + (c dy^2 + 2 pmin) <= 0, with discriminant k1 dy^2 + k2.
     """
     ok = opacity >= ALPHA_MIN and a > 0.0
     pmin = math.log(ALPHA_MIN / opacity) if ok else 0.0
-    u_lo = int(math.ceil(mx - r - 0.5))
-    u_hi = int(math.floor(mx + r - 0.5))
-    return ok, u_lo, u_hi, b * b - a * c, -2.0 * a * pmin, 1.0 / a if ok else 0.0
+    return ok, b * b - a * c, -2.0 * a * pmin, 1.0 / a if ok else 0.0
 
 
 @numba.njit(**_opts)
 def _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1):
     """Columns [lo, hi] of a row (offset dy from the centre) where alpha may reach 1/255: the roots
-    of the quadratic widened by a pixel (every pixel is then tested exactly), within the footprint
+    of the quadratic widened by a pixel (every pixel is then tested exactly), within the pixel box's
     columns and the tile."""
     disc = k1 * dy * dy + k2
     if disc < 0.0:
@@ -120,18 +140,18 @@ def _tile_box(tile, tiles_x, width, height):
 
 
 @numba.njit(**_opts)
-def _gaussian_in_tile(g, means2d, conics, radii, opacities, y0, y1):
+def _gaussian_in_tile(g, means2d, conics, boxes, opacities, y0, y1):
     """Everything the row scan of Gaussian g over a tile's rows [y0, y1] needs."""
-    mx, my, r = means2d[g, 0], means2d[g, 1], float(radii[g])
+    mx, my = means2d[g, 0], means2d[g, 1]
     a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
-    ok, u_lo, u_hi, k1, k2, inv_a = _gaussian_setup(mx, my, a, b, c, op, r)
-    vlo = max(y0, int(math.ceil(my - r - 0.5)))
-    vhi = min(y1, int(math.floor(my + r - 0.5)))
-    return ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, math.exp(-a), vlo, vhi
+    ok, k1, k2, inv_a = _gaussian_setup(a, b, c, op)
+    vlo = max(y0, boxes[g, 2])
+    vhi = min(y1, boxes[g, 3])
+    return ok, mx, my, a, b, c, op, boxes[g, 0], boxes[g, 1], k1, k2, inv_a, math.exp(-a), vlo, vhi
 
 
 @numba.njit(parallel=True, **_opts)
-def raster_forward(means2d, conics, depths, radii, opacities, colors, background, width, height,
+def raster_forward(means2d, conics, depths, boxes, opacities, colors, background, width, height,
                    counts, lists, image, alpha_img, depth_img, final_t, n_contrib, max_w_thread):
     tiles_x = (width + TILE - 1) // TILE
     n_tiles = counts.shape[0] - 1
@@ -144,6 +164,7 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
         dep = np.zeros(npx)
         last = np.zeros(npx, np.int64)
         done = np.zeros(npx, np.bool_)
+        row_live = np.full(y1 - y0 + 1, tw)   # pixels of each row still compositing
         n_done = 0
         start, stop = counts[tile], counts[tile + 1]
         for k in range(start, stop):
@@ -151,11 +172,13 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
                 break
             g = lists[k]
             ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
-                g, means2d, conics, radii, opacities, y0, y1)
+                g, means2d, conics, boxes, opacities, y0, y1)
             if not ok:
                 continue
             wmax = 0.0
             for v in range(vlo, vhi + 1):
+                if row_live[v - y0] == 0:
+                    continue
                 dy = v + 0.5 - my
                 lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
                 G, step = _row_start(lo, mx, dy, a, b, c)
@@ -174,6 +197,7 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
                     if test_t < T_MIN:
                         done[p] = True
                         n_done += 1
+                        row_live[v - y0] -= 1
                         continue
                     w = al * T[p]
                     for ch in range(C):
@@ -197,7 +221,7 @@ def raster_forward(means2d, conics, depths, radii, opacities, colors, background
 
 
 @numba.njit(parallel=True, **_opts)
-def raster_backward(means2d, conics, depths, radii, opacities, colors, background, width, height,
+def raster_backward(means2d, conics, depths, boxes, opacities, colors, background, width, height,
                     counts, lists, final_t, n_contrib, g_image, g_alpha, g_depth,
                     g_m2d, g_con, g_dep, g_op, g_col, g_bg):
     """Per-thread gradient buffers g_* [threads, N, ...] and g_bg [threads, C] are accumulated into."""
@@ -215,11 +239,13 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
         last_c = np.zeros((npx, C))
         last_d = np.zeros(npx)
         max_last = 0
+        row_last = np.zeros(y1 - y0 + 1, np.int64)   # per row: the largest last contributor + 1
         for v in range(y0, y1 + 1):
             for u in range(x0, x1 + 1):
                 p = (v - y0) * tw + (u - x0)
                 T[p] = final_t[v, u]
                 last[p] = n_contrib[v, u]
+                row_last[v - y0] = max(row_last[v - y0], last[p])
                 max_last = max(max_last, last[p])
                 for ch in range(C):
                     g_bg[tid, ch] += final_t[v, u] * g_image[v, u, ch]
@@ -229,13 +255,15 @@ def raster_backward(means2d, conics, depths, radii, opacities, colors, backgroun
             g = lists[k]
             idx = k - start
             ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
-                g, means2d, conics, radii, opacities, y0, y1)
+                g, means2d, conics, boxes, opacities, y0, y1)
             if not ok:
                 continue
             # this Gaussian's gradient over the tile, summed locally and stored once
             gdep = gop = gmx = gmy = gca = gcb = gcc = 0.0
             gcol[:] = 0.0
             for v in range(vlo, vhi + 1):
+                if idx >= row_last[v - y0]:
+                    continue
                 dy = v + 0.5 - my
                 lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
                 G_next, step = _row_start(lo, mx, dy, a, b, c)
