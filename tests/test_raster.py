@@ -1,6 +1,8 @@
 """The Gaussian rasterizer: backends against a dense brute force, gradients, hard cases."""
 import math
 
+import numpy as np
+
 import pytest
 import torch
 
@@ -205,3 +207,45 @@ def test_gsplat_matches_the_cpu_backend():
                  backend="gsplat")
     assert (gpu.image.cpu() - ref.image).abs().max() < 2e-2
     assert (gpu.image.cpu() - ref.image).abs().mean() < 1e-3
+
+
+def test_footprint_boxes_hold_every_pixel_alpha_reaches_and_are_tight():
+    """The cpu backend's per-Gaussian pixel boxes: every pixel whose alpha >= 1/255 (inside the
+    footprint square) lies in its Gaussian's box; and the box is tight: unless cut by the image or
+    the square, its edge columns / rows meet the ellipse d^T Q d <= k = 2 log(o / (1/255)) (whose
+    smallest value over a column at offset dx is dx^2 det(Q) / Q_yy) and the next ones out do not."""
+    from recon.raster.cpu_raster import footprints
+    from recon.raster.projection import project
+    from recon.raster.ref import gaussian_alphas
+    from recon.raster.types import ALPHA_MIN
+
+    n, w, h = 150, 64, 48
+    params, _ = scene(n, 1, seed=11, scale=(0.02, 0.12))
+    params[3] = torch.rand(n, generator=torch.Generator().manual_seed(3), dtype=torch.float64) ** 3 * 0.99
+    cam = camera(w, h, f=60.0, seed=11)
+    means2d, conics, _, radii = project(*params[:3], cam)
+    boxes, _ = footprints(means2d.numpy(), conics.numpy(), radii.numpy().astype(np.int32), params[3].numpy(), w, h)
+    vv, uu = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    px = torch.stack([uu.reshape(-1) + 0.5, vv.reshape(-1) + 0.5], -1)
+    alphas = gaussian_alphas(px, means2d, conics, params[3], radii).T.reshape(n, h, w)
+    n_checked = n_smaller = 0
+    for g in range(n):
+        u0, u1, v0, v1 = boxes[g]
+        hit = alphas[g] >= ALPHA_MIN
+        if hit.any():
+            rows, cols = torch.nonzero(hit, as_tuple=True)
+            assert u0 <= cols.min() and cols.max() <= u1 and v0 <= rows.min() and rows.max() <= v1, g
+        if u0 > u1 or params[3][g] < ALPHA_MIN:
+            continue
+        (a, b, c), (mx, my), r = conics[g].tolist(), means2d[g].tolist(), int(radii[g])
+        k, det = 2 * math.log(params[3][g].item() / ALPHA_MIN), a * c - b * b
+        reach_x = lambda u: (u + 0.5 - mx) ** 2 * det / c      # noqa: E731
+        reach_y = lambda v: (v + 0.5 - my) ** 2 * det / a      # noqa: E731
+        for edge, out, lim, reach, centre in ((u0, u0 - 1, 0, reach_x, mx), (u1, u1 + 1, w - 1, reach_x, mx),
+                                              (v0, v0 - 1, 0, reach_y, my), (v1, v1 + 1, h - 1, reach_y, my)):
+            if edge == lim or abs(out + 0.5 - centre) > r:      # cut by the image or the square
+                continue
+            assert reach(edge) <= k + 1e-2 and reach(out) > k - 1e-2, (g, edge)
+            n_checked += 1
+        n_smaller += (u1 - u0 + 1) * (v1 - v0 + 1) < 0.7 * (2 * r + 1) ** 2
+    assert n_checked > 100 and n_smaller > 20      # faint Gaussians: much less than the square

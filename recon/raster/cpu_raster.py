@@ -27,20 +27,39 @@ from recon.raster.types import ALPHA_MAX, ALPHA_MIN, T_MIN, TILE
 _opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
+@numba.njit(**_opts)
+def _gaussian_setup(a, b, c, opacity):
+    """Per-Gaussian constants of the row scan: the quadratic's coefficients.
+
+    Alpha can reach 1/255 where power >= pmin = log(1 / (255 opacity)); for a row at offset dy that
+    is a dx^2 + 2 b dy dx + (c dy^2 + 2 pmin) <= 0, with discriminant k1 dy^2 + k2.
+    """
+    ok = opacity >= ALPHA_MIN and a > 0.0
+    pmin = math.log(ALPHA_MIN / opacity) if ok else 0.0
+    return ok, b * b - a * c, -2.0 * a * pmin, 1.0 / a if ok else 0.0
+
+
 @numba.njit(parallel=True, **_opts)
 def footprints(means2d, conics, radii, opacities, width, height):
     """Pixel boxes [N, 4] (u0, u1, v0, v1; empty when u0 > u1) of the pixels each Gaussian can touch:
     the footprint square |d| <= radius cut to the bounding box of the ellipse d^T Q d <= 2 log(o / (1/255))
     (Q the conic) outside which alpha = o exp(-d^T Q d / 2) < 1/255. The ellipse's half-widths are
-    sqrt(k (Q^-1)_xx) and sqrt(k (Q^-1)_yy), widened by 1e-3 px against rounding."""
+    sqrt(k (Q^-1)_xx) and sqrt(k (Q^-1)_yy), widened by 1e-3 px against rounding.
+
+    Also returns the row scan's constants [N, 4] (k1, k2, 1/a, exp(-a): see `_gaussian_setup`), so
+    the tiles do not recompute a log and an exp per Gaussian each.
+    """
     n = means2d.shape[0]
     boxes = np.empty((n, 4), np.int64)
+    consts = np.zeros((n, 4), np.float64)
     for g in numba.prange(n):
         boxes[g, 0], boxes[g, 1], boxes[g, 2], boxes[g, 3] = 1, 0, 1, 0
         op, a, b, c = opacities[g], conics[g, 0], conics[g, 1], conics[g, 2]
         r = float(radii[g])
         if radii[g] <= 0 or not (op >= ALPHA_MIN and a > 0.0):
             continue
+        _, consts[g, 0], consts[g, 1], consts[g, 2] = _gaussian_setup(a, b, c, op)
+        consts[g, 3] = math.exp(-a)
         hx = hy = r
         det = a * c - b * b
         if det > 0.0:
@@ -54,7 +73,7 @@ def footprints(means2d, conics, radii, opacities, width, height):
         v1 = min(int(math.floor(my + hy - 0.5)), height - 1)
         if u0 <= u1 and v0 <= v1:
             boxes[g, 0], boxes[g, 1], boxes[g, 2], boxes[g, 3] = u0, u1, v0, v1
-    return boxes
+    return boxes, consts
 
 
 @numba.njit(**_opts)
@@ -88,18 +107,6 @@ def bin_tiles(boxes, order, width, height):
                 lists[fill[t]] = g
                 fill[t] += 1
     return counts, lists
-
-
-@numba.njit(**_opts)
-def _gaussian_setup(a, b, c, opacity):
-    """Per-Gaussian constants of the row scan: the quadratic's coefficients.
-
-    Alpha can reach 1/255 where power >= pmin = log(1 / (255 opacity)); for a row at offset dy that
-    is a dx^2 + 2 b dy dx + (c dy^2 + 2 pmin) <= 0, with discriminant k1 dy^2 + k2.
-    """
-    ok = opacity >= ALPHA_MIN and a > 0.0
-    pmin = math.log(ALPHA_MIN / opacity) if ok else 0.0
-    return ok, b * b - a * c, -2.0 * a * pmin, 1.0 / a if ok else 0.0
 
 
 @numba.njit(**_opts)
@@ -140,18 +147,17 @@ def _tile_box(tile, tiles_x, width, height):
 
 
 @numba.njit(**_opts)
-def _gaussian_in_tile(g, means2d, conics, boxes, opacities, y0, y1):
-    """Everything the row scan of Gaussian g over a tile's rows [y0, y1] needs."""
-    mx, my = means2d[g, 0], means2d[g, 1]
-    a, b, c, op = conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
-    ok, k1, k2, inv_a = _gaussian_setup(a, b, c, op)
+def _gaussian_in_tile(g, means2d, conics, boxes, consts, opacities, y0, y1):
+    """Everything the row scan of Gaussian g over a tile's rows [y0, y1] needs (binned Gaussians
+    only: their alpha can reach 1/255 somewhere)."""
     vlo = max(y0, boxes[g, 2])
     vhi = min(y1, boxes[g, 3])
-    return ok, mx, my, a, b, c, op, boxes[g, 0], boxes[g, 1], k1, k2, inv_a, math.exp(-a), vlo, vhi
+    return (means2d[g, 0], means2d[g, 1], conics[g, 0], conics[g, 1], conics[g, 2], opacities[g],
+            boxes[g, 0], boxes[g, 1], consts[g, 0], consts[g, 1], consts[g, 2], consts[g, 3], vlo, vhi)
 
 
 @numba.njit(parallel=True, **_opts)
-def raster_forward(means2d, conics, depths, boxes, opacities, colors, background, width, height,
+def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, background, width, height,
                    counts, lists, image, alpha_img, depth_img, final_t, n_contrib, max_w_thread):
     tiles_x = (width + TILE - 1) // TILE
     n_tiles = counts.shape[0] - 1
@@ -171,10 +177,8 @@ def raster_forward(means2d, conics, depths, boxes, opacities, colors, background
             if n_done == npx:
                 break
             g = lists[k]
-            ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
-                g, means2d, conics, boxes, opacities, y0, y1)
-            if not ok:
-                continue
+            mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
+                g, means2d, conics, boxes, consts, opacities, y0, y1)
             wmax = 0.0
             for v in range(vlo, vhi + 1):
                 if row_live[v - y0] == 0:
@@ -221,7 +225,7 @@ def raster_forward(means2d, conics, depths, boxes, opacities, colors, background
 
 
 @numba.njit(parallel=True, **_opts)
-def raster_backward(means2d, conics, depths, boxes, opacities, colors, background, width, height,
+def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, background, width, height,
                     counts, lists, final_t, n_contrib, g_image, g_alpha, g_depth,
                     g_m2d, g_con, g_dep, g_op, g_col, g_bg):
     """Per-thread gradient buffers g_* [threads, N, ...] and g_bg [threads, C] are accumulated into."""
@@ -240,6 +244,9 @@ def raster_backward(means2d, conics, depths, boxes, opacities, colors, backgroun
         last_d = np.zeros(npx)
         max_last = 0
         row_last = np.zeros(y1 - y0 + 1, np.int64)   # per row: the largest last contributor + 1
+        gimg = np.empty((npx, C))      # the tile's image gradient, contiguous
+        gdpx = np.empty(npx)           # depth gradient
+        gfin = np.empty(npx)           # (dL/dalpha - background . dL/dimage) x final transmittance
         for v in range(y0, y1 + 1):
             for u in range(x0, x1 + 1):
                 p = (v - y0) * tw + (u - x0)
@@ -247,17 +254,20 @@ def raster_backward(means2d, conics, depths, boxes, opacities, colors, backgroun
                 last[p] = n_contrib[v, u]
                 row_last[v - y0] = max(row_last[v - y0], last[p])
                 max_last = max(max_last, last[p])
+                bg_dot = 0.0
                 for ch in range(C):
+                    gimg[p, ch] = g_image[v, u, ch]
                     g_bg[tid, ch] += final_t[v, u] * g_image[v, u, ch]
+                    bg_dot += background[ch] * g_image[v, u, ch]
+                gdpx[p] = g_depth[v, u]
+                gfin[p] = (g_alpha[v, u] - bg_dot) * final_t[v, u]
         start = counts[tile]
         gcol = np.zeros(C)
         for k in range(start + max_last - 1, start - 1, -1):
             g = lists[k]
             idx = k - start
-            ok, mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
-                g, means2d, conics, boxes, opacities, y0, y1)
-            if not ok:
-                continue
+            mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
+                g, means2d, conics, boxes, consts, opacities, y0, y1)
             # this Gaussian's gradient over the tile, summed locally and stored once
             gdep = gop = gmx = gmy = gca = gcb = gcc = 0.0
             gcol[:] = 0.0
@@ -283,23 +293,20 @@ def raster_backward(means2d, conics, depths, boxes, opacities, colors, backgroun
                     T[p] = T[p] * inv_keep             # transmittance in front of g
                     wgt = al * T[p]
                     dl_dal = 0.0
-                    bg_dot = 0.0
                     for ch in range(C):
                         acc[p, ch] = last_a[p] * last_c[p, ch] + (1.0 - last_a[p]) * acc[p, ch]
                         last_c[p, ch] = colors[g, ch]
-                        gi = g_image[v, u, ch]
+                        gi = gimg[p, ch]
                         dl_dal += (colors[g, ch] - acc[p, ch]) * gi
                         gcol[ch] += wgt * gi
-                        bg_dot += background[ch] * gi
                     acc_d[p] = last_a[p] * last_d[p] + (1.0 - last_a[p]) * acc_d[p]
                     last_d[p] = depths[g]
-                    gd = g_depth[v, u]
+                    gd = gdpx[p]
                     dl_dal += (depths[g] - acc_d[p]) * gd
                     gdep += wgt * gd
                     dl_dal *= T[p]
                     last_a[p] = al
-                    ft_over = final_t[v, u] * inv_keep
-                    dl_dal += (g_alpha[v, u] - bg_dot) * ft_over
+                    dl_dal += gfin[p] * inv_keep
                     if op * G > ALPHA_MAX:
                         continue                       # alpha is capped: no gradient to opacity or shape
                     gop += G * dl_dal
