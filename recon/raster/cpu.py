@@ -107,4 +107,7 @@ class _Rasterize(torch.autograd.Function):
 
 
 def rasterize_cpu(means2d, conics, depths, radii, opacities, colors, background, width, height):
+    if not 1 <= colors.shape[1] <= 3:
+        raise ValueError(f"render: the cpu backend renders 1 to 3 colour channels, got {colors.shape[1]} "
+                         "(use backend='torch' for more)")
     return _Rasterize.apply(means2d, conics, depths, opacities, colors, background, radii, width, height)

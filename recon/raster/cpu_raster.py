@@ -10,7 +10,8 @@ organised for speed:
   where its alpha can reach 1/255 (the roots of a quadratic, widened by a pixel and then tested
   exactly per pixel, so the result is the same as testing every pixel); rows whose pixels have all
   stopped (transmittance below T_MIN) are skipped without computing their span;
-- per-thread buffers for max_weight and gradients, reduced at the end (no atomics).
+- per-thread buffers for max_weight and gradients, reduced at the end (no atomics);
+- one to three colour channels (colours and gradients as scalars in registers, no channel loop).
 The backward visits each tile's Gaussians back to front with the same row intervals and runs the
 standard reverse compositing recurrence per pixel, skipping rows where every pixel stopped before
 the current Gaussian.
@@ -22,7 +23,11 @@ import math
 import numba
 import numpy as np
 
-from recon.raster.types import ALPHA_MAX, ALPHA_MIN, T_MIN, TILE
+from recon.raster.types import ALPHA_MAX, ALPHA_MIN, T_MIN
+
+# Tiles of this backend (its results do not depend on them): wide, so a small Gaussian straddles fewer
+# tiles (each straddle repeats its row set-up), and short enough to give 2 threads ~190 tiles to share.
+TILE_W, TILE_H = 32, 16
 
 _opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
@@ -81,14 +86,14 @@ def _tile_range(g, boxes):
     """Tiles [tx0, tx1] x [ty0, ty1] touched by Gaussian g's pixel box (empty when tx0 > tx1)."""
     if boxes[g, 0] > boxes[g, 1]:
         return 1, 0, 1, 0
-    return boxes[g, 0] // TILE, boxes[g, 1] // TILE, boxes[g, 2] // TILE, boxes[g, 3] // TILE
+    return boxes[g, 0] // TILE_W, boxes[g, 1] // TILE_W, boxes[g, 2] // TILE_H, boxes[g, 3] // TILE_H
 
 
 @numba.njit(**_opts)
 def bin_tiles(boxes, order, width, height):
     """CSR tile lists: Gaussians whose pixel box overlaps each tile, in `order` (front to back)."""
-    tiles_x = (width + TILE - 1) // TILE
-    tiles_y = (height + TILE - 1) // TILE
+    tiles_x = (width + TILE_W - 1) // TILE_W
+    tiles_y = (height + TILE_H - 1) // TILE_H
     counts = np.zeros(tiles_x * tiles_y + 1, np.int64)
     for g in order:
         tx0, tx1, ty0, ty1 = _tile_range(g, boxes)
@@ -137,12 +142,18 @@ def _row_start(lo, mx, dy, a, b, c):
 
 
 @numba.njit(**_opts)
+def _colour3(colors, g, C):
+    """Gaussian g's colour as three scalars (channels >= C are zero): the kernels handle 1-3 channels."""
+    return colors[g, 0], colors[g, 1] if C > 1 else 0.0, colors[g, 2] if C > 2 else 0.0
+
+
+@numba.njit(**_opts)
 def _tile_box(tile, tiles_x, width, height):
     """Pixel box [x0, x1] x [y0, y1] of a tile, its width and pixel count."""
-    x0 = (tile % tiles_x) * TILE
-    y0 = (tile // tiles_x) * TILE
-    x1 = min(x0 + TILE, width) - 1
-    y1 = min(y0 + TILE, height) - 1
+    x0 = (tile % tiles_x) * TILE_W
+    y0 = (tile // tiles_x) * TILE_H
+    x1 = min(x0 + TILE_W, width) - 1
+    y1 = min(y0 + TILE_H, height) - 1
     return x0, x1, y0, y1, x1 - x0 + 1, (x1 - x0 + 1) * (y1 - y0 + 1)
 
 
@@ -159,14 +170,14 @@ def _gaussian_in_tile(g, means2d, conics, boxes, consts, opacities, y0, y1):
 @numba.njit(parallel=True, **_opts)
 def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, background, width, height,
                    counts, lists, image, alpha_img, depth_img, final_t, n_contrib, max_w_thread):
-    tiles_x = (width + TILE - 1) // TILE
+    tiles_x = (width + TILE_W - 1) // TILE_W
     n_tiles = counts.shape[0] - 1
     C = colors.shape[1]
     for tile in numba.prange(n_tiles):
         tid = numba.get_thread_id()
         x0, x1, y0, y1, tw, npx = _tile_box(tile, tiles_x, width, height)
         T = np.ones(npx)
-        acc = np.zeros((npx, C))
+        acc = np.zeros((3, npx))       # colour planes (channels >= C stay zero)
         dep = np.zeros(npx)
         last = np.zeros(npx, np.int64)
         done = np.zeros(npx, np.bool_)
@@ -179,6 +190,8 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
             g = lists[k]
             mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
                 g, means2d, conics, boxes, consts, opacities, y0, y1)
+            cg0, cg1, cg2 = _colour3(colors, g, C)
+            dg = depths[g]
             wmax = 0.0
             for v in range(vlo, vhi + 1):
                 if row_live[v - y0] == 0:
@@ -204,20 +217,20 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
                         row_live[v - y0] -= 1
                         continue
                     w = al * T[p]
-                    for ch in range(C):
-                        acc[p, ch] += w * colors[g, ch]
-                    dep[p] += w * depths[g]
+                    acc[0, p] += w * cg0
+                    acc[1, p] += w * cg1
+                    acc[2, p] += w * cg2
+                    dep[p] += w * dg
                     T[p] = test_t
                     last[p] = k - start + 1
-                    if w > wmax:
-                        wmax = w
+                    wmax = max(wmax, w)      # branch-free: the comparison is unpredictable
             if wmax > max_w_thread[tid, g]:
                 max_w_thread[tid, g] = wmax
         for v in range(y0, y1 + 1):
             for u in range(x0, x1 + 1):
                 p = (v - y0) * tw + (u - x0)
                 for ch in range(C):
-                    image[v, u, ch] = acc[p, ch] + T[p] * background[ch]
+                    image[v, u, ch] = acc[ch, p] + T[p] * background[ch]
                 alpha_img[v, u] = 1.0 - T[p]
                 depth_img[v, u] = dep[p]
                 final_t[v, u] = T[p]
@@ -229,7 +242,7 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
                     counts, lists, final_t, n_contrib, g_image, g_alpha, g_depth,
                     g_m2d, g_con, g_dep, g_op, g_col, g_bg):
     """Per-thread gradient buffers g_* [threads, N, ...] and g_bg [threads, C] are accumulated into."""
-    tiles_x = (width + TILE - 1) // TILE
+    tiles_x = (width + TILE_W - 1) // TILE_W
     n_tiles = counts.shape[0] - 1
     C = colors.shape[1]
     for tile in numba.prange(n_tiles):
@@ -237,14 +250,16 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
         x0, x1, y0, y1, tw, npx = _tile_box(tile, tiles_x, width, height)
         T = np.empty(npx)
         last = np.empty(npx, np.int64)
-        acc = np.zeros((npx, C))       # colour composited behind the current Gaussian, per unit T
-        acc_d = np.zeros(npx)
+        # Colour and depth composited behind the current Gaussian enter the gradient only through their
+        # dot product with the pixel's (fixed) image and depth gradient, and that dot product follows the
+        # same linear recurrence: S = a_prev * H_prev + (1 - a_prev) * S, with H = colour . dL/dimage +
+        # depth * dL/ddepth of a contributor. So a pixel's state is a few scalars, whatever C.
+        S = np.zeros(npx)
+        H_prev = np.zeros(npx)
         last_a = np.zeros(npx)
-        last_c = np.zeros((npx, C))
-        last_d = np.zeros(npx)
         max_last = 0
         row_last = np.zeros(y1 - y0 + 1, np.int64)   # per row: the largest last contributor + 1
-        gimg = np.empty((npx, C))      # the tile's image gradient, contiguous
+        gimg = np.zeros((3, npx))      # the tile's image gradient planes (channels >= C stay zero)
         gdpx = np.empty(npx)           # depth gradient
         gfin = np.empty(npx)           # (dL/dalpha - background . dL/dimage) x final transmittance
         for v in range(y0, y1 + 1):
@@ -256,21 +271,21 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
                 max_last = max(max_last, last[p])
                 bg_dot = 0.0
                 for ch in range(C):
-                    gimg[p, ch] = g_image[v, u, ch]
+                    gimg[ch, p] = g_image[v, u, ch]
                     g_bg[tid, ch] += final_t[v, u] * g_image[v, u, ch]
                     bg_dot += background[ch] * g_image[v, u, ch]
                 gdpx[p] = g_depth[v, u]
                 gfin[p] = (g_alpha[v, u] - bg_dot) * final_t[v, u]
         start = counts[tile]
-        gcol = np.zeros(C)
         for k in range(start + max_last - 1, start - 1, -1):
             g = lists[k]
             idx = k - start
             mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
                 g, means2d, conics, boxes, consts, opacities, y0, y1)
+            cg0, cg1, cg2 = _colour3(colors, g, C)
+            dg = depths[g]
             # this Gaussian's gradient over the tile, summed locally and stored once
-            gdep = gop = gmx = gmy = gca = gcb = gcc = 0.0
-            gcol[:] = 0.0
+            gdep = gop = gmx = gmy = gca = gcb = gcc = gc0 = gc1 = gc2 = 0.0
             for v in range(vlo, vhi + 1):
                 if idx >= row_last[v - y0]:
                     continue
@@ -285,30 +300,27 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
                     step *= q
                     if idx >= last[p]:
                         continue
-                    dx = u + 0.5 - mx
                     al = min(ALPHA_MAX, op * G)
                     if al < ALPHA_MIN:
                         continue
                     inv_keep = 1.0 / (1.0 - al)
-                    T[p] = T[p] * inv_keep             # transmittance in front of g
-                    wgt = al * T[p]
-                    dl_dal = 0.0
-                    for ch in range(C):
-                        acc[p, ch] = last_a[p] * last_c[p, ch] + (1.0 - last_a[p]) * acc[p, ch]
-                        last_c[p, ch] = colors[g, ch]
-                        gi = gimg[p, ch]
-                        dl_dal += (colors[g, ch] - acc[p, ch]) * gi
-                        gcol[ch] += wgt * gi
-                    acc_d[p] = last_a[p] * last_d[p] + (1.0 - last_a[p]) * acc_d[p]
-                    last_d[p] = depths[g]
-                    gd = gdpx[p]
-                    dl_dal += (depths[g] - acc_d[p]) * gd
-                    gdep += wgt * gd
-                    dl_dal *= T[p]
+                    Tp = T[p] * inv_keep               # transmittance in front of g
+                    T[p] = Tp
+                    wgt = al * Tp
+                    la = last_a[p]
+                    S[p] = la * H_prev[p] + (1.0 - la) * S[p]
+                    g0, g1, g2, gd = gimg[0, p], gimg[1, p], gimg[2, p], gdpx[p]
+                    here = cg0 * g0 + cg1 * g1 + cg2 * g2 + dg * gd
+                    H_prev[p] = here
                     last_a[p] = al
-                    dl_dal += gfin[p] * inv_keep
+                    dl_dal = (here - S[p]) * Tp + gfin[p] * inv_keep
+                    gc0 += wgt * g0
+                    gc1 += wgt * g1
+                    gc2 += wgt * g2
+                    gdep += wgt * gd
                     if op * G > ALPHA_MAX:
                         continue                       # alpha is capped: no gradient to opacity or shape
+                    dx = u + 0.5 - mx
                     gop += G * dl_dal
                     dl_dpow = op * G * dl_dal
                     gmx += dl_dpow * (a * dx + b * dy)
@@ -316,8 +328,11 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
                     gca += dl_dpow * (-0.5 * dx * dx)
                     gcb += dl_dpow * (-dx * dy)
                     gcc += dl_dpow * (-0.5 * dy * dy)
-            for ch in range(C):
-                g_col[tid, g, ch] += gcol[ch]
+            g_col[tid, g, 0] += gc0
+            if C > 1:
+                g_col[tid, g, 1] += gc1
+            if C > 2:
+                g_col[tid, g, 2] += gc2
             g_dep[tid, g] += gdep
             g_op[tid, g] += gop
             g_m2d[tid, g, 0] += gmx
