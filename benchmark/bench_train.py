@@ -50,16 +50,19 @@ class Clock:
         self.parts[part] += seconds
 
 
-def instrument(clock: Clock) -> None:
-    """Wrap the cpu backend's autograd Functions and the deformation field with timers."""
+def instrument(clock: Clock):
+    """Wrap the cpu backend's autograd Functions and the deformation field with timers; returns a
+    function that undoes it."""
     import torch
 
     import recon.raster.cpu as cpu
     from recon.deform import DeformationField
 
+    saved = []
     for obj in list(vars(cpu).values()):
         if isinstance(obj, type) and issubclass(obj, torch.autograd.Function) and obj is not torch.autograd.Function:
             for name, part in (("forward", "raster_fwd"), ("backward", "raster_bwd")):
+                saved.append((obj, name, obj.__dict__[name]))
                 fn = obj.__dict__[name].__func__ if isinstance(obj.__dict__[name], staticmethod) else obj.__dict__[name]
 
                 def timed(*a, _fn=fn, _part=part, **k):
@@ -70,6 +73,7 @@ def instrument(clock: Clock) -> None:
                 setattr(obj, name, staticmethod(timed))
 
     forward = DeformationField.forward
+    saved.append((DeformationField, "forward", forward))
 
     def timed_forward(self, x, t):
         t0 = time.perf_counter()
@@ -91,6 +95,11 @@ def instrument(clock: Clock) -> None:
                 first.register_hook(finished)
         return outs
     DeformationField.forward = timed_forward
+
+    def restore():
+        for owner, name, value in reversed(saved):
+            setattr(owner, name, value)
+    return restore
 
 
 def _first_layer_node(root, weight):

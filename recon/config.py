@@ -166,6 +166,10 @@ class EventConfig:
     n_events_room: tuple[int, int] = (100_000, 1_000_000)
     noise_sigma: float = 0.02          # log units, on event-free pixels (0: no jitter)
     max_window_fraction: float = 0.5
+    # cameras supervised per step: the ESS window of one camera, then the same time window on
+    # views_per_step - 1 others; the deformation runs once per timestamp for all of them. The paper does
+    # not say how many views a step uses; 1 is one camera per step.
+    views_per_step: int = 1
     # AES: learnable contrast threshold C_hat = exp(log_c), initialised at c_init; fixed when off
     aes: bool = True
     c_init: float = 0.15
@@ -191,7 +195,8 @@ class EventConfig:
         lo, hi = self.window_fraction
         if not 0 < lo <= hi <= 1:
             raise ConfigError(f"window_fraction: expected 0 < min <= max <= 1, got {[lo, hi]}")
-        check_positive(self, "c_init", "recon_eps", "iip_interval", "iip_times", "max_window_fraction")
+        check_positive(self, "c_init", "recon_eps", "iip_interval", "iip_times", "max_window_fraction",
+                       "views_per_step")
         if self.noise_sigma < 0 or self.lambda_tv < 0 or self.lambda_recon < 0:
             raise ConfigError("noise_sigma, lambda_tv, lambda_recon: expected values >= 0")
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from simulator.h5io import EventFileError, read_info
+from simulator.h5io import EventFileError, read_info, window_indices
 
 _TIE_PAD = 1024   # extra rows read past the window to include events sharing its end time
 
@@ -68,6 +68,12 @@ class EventSource:
         x, y, p = self.rows(i0 - 1 + lo, i0 - 1 + hi)
         return EventWindow(camera, t_start, t_end, x, y, p)
 
+    def window_between(self, camera: int, t_start_us: int, t_end_us: int) -> EventWindow:
+        """This camera's events with t_start < t <= t_end (the same time window as another camera's)."""
+        i0, i1 = window_indices(self._f, t_start_us + 1, t_end_us + 1)
+        x, y, p = self.rows(i0, i1)
+        return EventWindow(camera, t_start_us, t_end_us, x, y, p)
+
     def close(self) -> None:
         self._f.close()
 
@@ -94,6 +100,13 @@ class WindowSampler:
         n = int(rng.integers(lo, hi + 1))
         i0 = int(rng.integers(1, src.n - n + 1))
         return src.window(cam, i0, n)
+
+    def sample_views(self, rng: np.random.Generator, n_views: int) -> list[EventWindow]:
+        """One ESS window as `sample` draws it, then the same time window on n_views - 1 other cameras
+        (distinct, in random order): the multi-view step's supervision."""
+        first = self.sample(rng)
+        others = [c for c in rng.permutation(len(self.sources)).tolist() if c != first.camera][:n_views - 1]
+        return [first] + [self.sources[c].window_between(c, first.t_start_us, first.t_end_us) for c in others]
 
     def close(self) -> None:
         for s in self.sources:

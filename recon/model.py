@@ -21,7 +21,7 @@ from e4dgs.fileio import atomic_output
 from recon.deform import DeformationField
 from recon.gaussians import GaussianModel
 from recon.raster import Camera, RenderOutput
-from recon.render import camera_from_pose, check_time, render_at
+from recon.render import camera_from_pose, check_time, render_at, render_views
 
 FORMAT = "e4dgs-dynamic-gaussians/1"
 
@@ -71,6 +71,11 @@ class DynamicGaussians:
         """Differentiable render at normalised time t (the deformation applies once enabled)."""
         field = self.deform if self.meta.deform_enabled else None
         return render_at(self.gaussians, field, camera, t, self.background, backend, self.meta.deform_bf16)
+
+    def render_outputs(self, cameras: list[Camera], t: float, backend: str = "auto") -> list[RenderOutput]:
+        """Differentiable renders of several cameras at time t, sharing one deformation evaluation."""
+        field = self.deform if self.meta.deform_enabled else None
+        return render_views(self.gaussians, field, cameras, t, self.background, backend, self.meta.deform_bf16)
 
     @torch.no_grad()
     def render(self, camera: Camera | int, t: float, backend: str = "auto") -> torch.Tensor:

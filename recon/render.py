@@ -44,7 +44,18 @@ def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float,
 def render_at(gaussians: GaussianModel, field: DeformationField | None, camera: Camera, t: float,
               background: torch.Tensor, backend: str = "auto", bf16: bool = False) -> RenderOutput:
     """Render the model deformed to normalised time t in [0, 1] (field None: the canonical model)."""
+    return render_views(gaussians, field, [camera], t, background, backend, bf16)[0]
+
+
+def render_views(gaussians: GaussianModel, field: DeformationField | None, cameras: list[Camera], t: float,
+                 background: torch.Tensor, backend: str = "auto", bf16: bool = False) -> list[RenderOutput]:
+    """Render several cameras at one normalised time t: the deformation field runs once and every
+    render shares its output (and its gradient)."""
     check_time(t)
     means, quats, log_scales = deformed(gaussians, field, t, bf16)
-    colors = gaussians.colors(camera_center(camera).to(means.dtype), means)
-    return render(means, quats, torch.exp(log_scales), gaussians.opacities, colors, camera, background, backend)
+    scales, opacities = torch.exp(log_scales), gaussians.opacities
+    outs = []
+    for camera in cameras:
+        colors = gaussians.colors(camera_center(camera).to(means.dtype), means)
+        outs.append(render(means, quats, scales, opacities, colors, camera, background, backend))
+    return outs

@@ -189,3 +189,37 @@ def test_bench_report_cli_regenerates_without_training(tmp_path):
         main(["bench", "--preset", "nosuch", "--report"])
     with pytest.raises(SystemExit, match="not in preset"):
         main(["bench", "--preset", "quick", "--scenes", "atlantis", "--out", str(tmp_path)])
+
+
+def test_bench_train_breakdown_times_every_part_inside_an_iteration():
+    """The training benchmark's timers: raster forward/backward and MLP forward/backward are all seen
+    inside one deformed render's forward + backward, each shorter than the whole, and undone after."""
+    import time
+
+    import torch
+
+    from benchmark.bench_train import PARTS, Clock, instrument
+    from recon.deform import DeformationField
+    from recon.gaussians import GaussianModel
+    from recon.raster import Camera
+    from recon.render import render_at
+
+    clock = Clock()
+    original = DeformationField.forward
+    restore = instrument(clock)
+    try:
+        g = GaussianModel.from_points(np.random.default_rng(0).uniform(-0.5, 0.5, (300, 3)), channels=1)
+        field = DeformationField()
+        cam = Camera(torch.tensor([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]]),
+                     torch.tensor([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 64, 48)
+        for bf16 in (False, True):
+            clock.parts = dict.fromkeys(PARTS, 0.0)
+            t0 = time.perf_counter()
+            out = render_at(g, field, cam, 0.4, torch.zeros(1), "cpu", bf16)
+            (out.image.square().mean() + g.means.sum() * 0).backward()
+            total = time.perf_counter() - t0
+            assert all(0 < clock.parts[p] < total for p in PARTS), (bf16, clock.parts)
+            assert not clock.mlp_started
+    finally:
+        restore()
+    assert DeformationField.forward is original

@@ -54,11 +54,11 @@ def test_ess_switch_fixes_the_count_and_drops_the_jitter(motion_scene, tmp_path)
     assert all(abs(c - fixed) <= 50 for c in counts_off)          # ties at the window ends only
     # without ESS, event-free pixels carry exactly zero
     win = off.method.sampler.sample(rng)
-    loss_a, _ = off.method.event_loss(off, win)
-    loss_b, _ = off.method.event_loss(off, win)
+    loss_a, _ = off.method.event_loss(off, [win])
+    loss_b, _ = off.method.event_loss(off, [win])
     assert loss_a.item() == loss_b.item()                          # no random jitter drawn
-    loss_c, _ = on.method.event_loss(on, win)
-    loss_d, _ = on.method.event_loss(on, win)
+    loss_c, _ = on.method.event_loss(on, [win])
+    loss_d, _ = on.method.event_loss(on, [win])
     assert loss_c.item() != loss_d.item()                          # jitter drawn per step
 
 
@@ -85,8 +85,8 @@ def test_tv_switch_changes_the_loss_by_its_term(motion_scene, tmp_path):
     no_tv = trainer_for(motion_scene, tmp_path / "notv", **{"events.ess": False, "events.lambda_tv": 0.0})
     no_tv.model = with_tv.model
     win = with_tv.method.sampler.sample(np.random.default_rng(1))
-    a, renders = with_tv.method.event_loss(with_tv, win)
-    b, _ = no_tv.method.event_loss(no_tv, win)
+    a, renders = with_tv.method.event_loss(with_tv, [win])
+    b, _ = no_tv.method.event_loss(no_tv, [win])
     tv = ev.tv_loss(renders[1][0].image)
     assert a.item() == pytest.approx(b.item() + 0.005 * tv.item(), rel=1e-6)
     assert tv.item() > 0
@@ -138,3 +138,37 @@ def test_rgb_variant_renders_blur_as_the_mean_over_the_exposure(motion_scene, tm
     centre = trainer_for(motion_scene, tmp_path / "c", "e4dgs_rgb", **{"rgb_frames": "strong", "rgb_render": "centre"})
     assert len(centre.method.blur_views[0].cameras) == 1
     assert centre.method.blur_views[0].times[0] == pytest.approx(rec.time, abs=1e-4)
+
+
+def test_multi_view_step_supervises_the_same_time_window_on_distinct_cameras(motion_scene, tmp_path):
+    """views_per_step: the other cameras' windows cover the first window's interval exactly (their
+    events are the file's events in (t_start, t_end]); the deformation runs once per end point for
+    every camera; the loss is the mean of the single-camera losses; too many cameras is an error."""
+    from simulator.h5io import read_events
+
+    tr = trainer_for(motion_scene, tmp_path, **{"events.views_per_step": 2, "events.noise_sigma": 0.0})
+    tr.model.meta.deform_enabled = True
+    ds = tr.dataset
+    streams = [read_events(ds.event_file(k)).events for k in range(ds.n_cameras)]
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        windows = tr.method.sampler.sample_views(rng, 2)
+        assert sorted(w.camera for w in windows) == [0, 1]
+        assert len({(w.t_start_us, w.t_end_us) for w in windows}) == 1
+        for w in windows:
+            ev = streams[w.camera]
+            inside = (ev["t"] > w.t_start_us) & (ev["t"] <= w.t_end_us)
+            np.testing.assert_array_equal(np.sort(ev["x"][inside].astype(int) * 100 + ev["y"][inside]),
+                                          np.sort(w.x.astype(int) * 100 + w.y))
+    calls = []
+    field_forward = tr.model.deform.forward
+    tr.model.deform.forward = lambda *a, **k: calls.append(1) or field_forward(*a, **k)
+    loss, renders = tr.method.event_loss(tr, windows)
+    assert len(calls) == 2 and len(renders) == 4                # 2 end points x 2 cameras
+    single = [tr.method.event_loss(tr, [w])[0].item() for w in windows]
+    assert loss.item() == pytest.approx(np.mean(single), rel=1e-6)
+    tr.model.deform.forward = field_forward
+    loss.backward()
+    assert tr.model.gaussians.means.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="views_per_step"):
+        trainer_for(motion_scene, tmp_path / "x", **{"events.views_per_step": 3})

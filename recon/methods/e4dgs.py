@@ -5,11 +5,14 @@ blurred RGB frames of one level. Model outputs are sRGB-encoded like the dataset
 loss decodes them to linear light and applies the simulator's response (log(I + eps) or lin-log,
 read from the event files), so L_hat is the quantity the events measure. Each step:
 
-1. ESS: a camera and a window of N events (recon.event_windows); N_gt from the events and the
-   simulator's thresholds, with N(0, sigma) jitter on event-free pixels (recon.events.gt_counts);
-2. two renders at the window's end points, poses interpolated along the camera's trajectory;
+1. ESS: a camera and a window of N events (recon.event_windows), and with `views_per_step` > 1 the
+   same time window on other cameras; N_gt from the events and the simulator's thresholds, with
+   N(0, sigma) jitter on event-free pixels (recon.events.gt_counts);
+2. renders at the window's end points, poses interpolated along each camera's trajectory (the
+   deformation field runs once per end point for every camera);
 3. AES: N_pred = (L_hat(t_end) - L_hat(t_start)) / C_hat with a learnable C_hat = exp(log_c);
-4. L = 1.0 L_recon + 0.005 TV(render at t_end) [+ 1.0 (L1 + D-SSIM) on a blurred frame].
+4. L = mean over the cameras of 1.0 L_recon + 0.005 TV(render at t_end) [+ 1.0 (L1 + D-SSIM) on a
+   blurred frame].
 
 IIP prunes by importance (the rasterizer's max alpha x transmittance over the training cameras at
 `iip_times` timestamps); there is no opacity reset. Test views are scored after per-image colour
@@ -66,6 +69,9 @@ class E4DGS(Method):
         self.response = {"mode": str(info.get("sim_log_mode", "log")), "eps": float(info.get("sim_log_eps", 1e-3)),
                          "linlog_threshold_dn": float(info.get("sim_linlog_threshold_dn", 20.0)),
                          "dn_per_unit": float(info.get("sim_linlog_dn_per_unit", 255.0))}
+        if e.views_per_step > dataset.n_cameras:
+            raise ValueError(f"events.views_per_step: {e.views_per_step} cameras asked for, the dataset "
+                             f"{dataset.dir} has {dataset.n_cameras}")
         self.log_c = nn.Parameter(torch.tensor(math.log(e.c_init)), requires_grad=e.aes)
         self.blur_views = self._blur_views() if self.uses_rgb else []
 
@@ -126,20 +132,27 @@ class E4DGS(Method):
         return ev.log_response_t(lum, r["mode"], r["eps"], r["linlog_threshold_dn"], r["dn_per_unit"])
 
     # -- one iteration --------------------------------------------------------------------------
-    def event_loss(self, trainer, window):
+    def event_loss(self, trainer, windows):
+        """Mean event loss over windows that share one time interval (one per camera)."""
         ds, e = self.dataset, self.cfg.events
-        t_s, t_e = window.t_start_us / ds.duration_us, window.t_end_us / ds.duration_us
-        cam_s, cam_e = dataset_camera(ds, window.camera, window.t_start_us), dataset_camera(ds, window.camera, window.t_end_us)
-        out_s = trainer.model.render_output(cam_s, min(max(t_s, 0.0), 1.0), trainer.tcfg.backend)
-        out_e = trainer.model.render_output(cam_e, min(max(t_e, 0.0), 1.0), trainer.tcfg.backend)
+        t_start_us, t_end_us = windows[0].t_start_us, windows[0].t_end_us
+        t_s = min(max(t_start_us / ds.duration_us, 0.0), 1.0)
+        t_e = min(max(t_end_us / ds.duration_us, 0.0), 1.0)
+        cams_s = [dataset_camera(ds, w.camera, t_start_us) for w in windows]
+        cams_e = [dataset_camera(ds, w.camera, t_end_us) for w in windows]
+        outs_s = trainer.model.render_outputs(cams_s, t_s, trainer.tcfg.backend)
+        outs_e = trainer.model.render_outputs(cams_e, t_e, trainer.tcfg.backend)
         intr = ds.intrinsics
-        de, hits = ev.event_maps(window.x, window.y, window.p, intr.width, intr.height, self.c_pos, self.c_neg)
-        n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0, trainer.rng))
-        n_pred = ev.predicted_counts(self.log_intensity(out_s.image), self.log_intensity(out_e.image), self.c_hat)
-        loss = e.lambda_recon * ev.recon_loss(n_gt, n_pred, e.recon_eps)
-        if e.lambda_tv > 0:
-            loss = loss + e.lambda_tv * ev.tv_loss(out_e.image)
-        return loss, [(out_s, cam_s), (out_e, cam_e)]
+        loss = 0.0
+        for window, out_s, out_e in zip(windows, outs_s, outs_e):
+            de, hits = ev.event_maps(window.x, window.y, window.p, intr.width, intr.height, self.c_pos, self.c_neg)
+            n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0, trainer.rng))
+            n_pred = ev.predicted_counts(self.log_intensity(out_s.image), self.log_intensity(out_e.image), self.c_hat)
+            loss = loss + e.lambda_recon * ev.recon_loss(n_gt, n_pred, e.recon_eps)
+            if e.lambda_tv > 0:
+                loss = loss + e.lambda_tv * ev.tv_loss(out_e.image)
+        renders = list(zip(outs_s, cams_s)) + list(zip(outs_e, cams_e))
+        return loss / len(windows), renders
 
     def rgb_loss(self, trainer):
         view = self.blur_views[trainer.next_index(len(self.blur_views))]
@@ -152,7 +165,10 @@ class E4DGS(Method):
         return loss, list(zip(outs, view.cameras))
 
     def step(self, trainer, iteration: int):
-        loss, renders = self.event_loss(trainer, self.sampler.sample(trainer.rng))
+        e = self.cfg.events
+        windows = [self.sampler.sample(trainer.rng)] if e.views_per_step == 1 else \
+            self.sampler.sample_views(trainer.rng, e.views_per_step)
+        loss, renders = self.event_loss(trainer, windows)
         if self.uses_rgb and self.cfg.lambda_rgb > 0:
             l_rgb, more = self.rgb_loss(trainer)
             loss, renders = loss + self.cfg.lambda_rgb * l_rgb, renders + more
