@@ -59,33 +59,35 @@ def linlog_response_ref(intensity: np.ndarray, threshold_dn: float, dn_per_unit:
 
 def linlog_response(intensity: np.ndarray, threshold_dn: float, dn_per_unit: float,
                     out: np.ndarray | None = None, scratch: np.ndarray | None = None) -> np.ndarray:
-    """`linlog_response_ref` in whole-array passes over kept buffers (boolean indexing and fresh
-    arrays cost ~20x a log per frame here). `scratch` [2, *shape] float64 is reused when given.
+    """`linlog_response_ref` in the precision of `out` (float64 when out is None), like
+    `log_response`, in whole-array passes over kept buffers (boolean indexing and fresh arrays
+    cost ~20x a log per frame here). `scratch` [2, *shape] of out's dtype is reused when given.
 
     For thr > e the two branches meet as a minimum: DN k (k = log(thr)/thr) is the chord through the
     origin and (thr, log thr), below log(max(DN, thr)) = log(thr) when DN < thr, and above log(DN) when
     DN > thr because log(x)/x decreases for x > e. So the response is min(log(max(DN, thr)), DN k):
-    equal to the reference except within an ulp at DN == thr, where the two branches agree to an ulp.
-    For thr <= e the branches are blended with 0/1 weights (x * 1 + y * 0 == x: the reference's bits).
+    in float64 equal to the reference except within an ulp at DN == thr, where the two branches agree
+    to an ulp. For thr <= e the branches are blended with 0/1 weights (x * 1 + y * 0 == x).
     """
     shape = np.shape(intensity)
-    private = scratch is None or scratch.shape != (2,) + shape or scratch.dtype != np.float64
+    dtype = np.dtype(np.float64 if out is None else out.dtype)
+    private = scratch is None or scratch.shape != (2,) + shape or scratch.dtype != dtype
     if private:
-        scratch = np.empty((2,) + shape, np.float64)
+        scratch = np.empty((2,) + shape, dtype)
     dn, res = scratch[0], scratch[1]
     k = math.log(threshold_dn) / threshold_dn
-    np.multiply(intensity, dn_per_unit, out=dn, dtype=np.float64)
-    np.maximum(dn, threshold_dn, out=res)
+    np.multiply(intensity, dtype.type(dn_per_unit), out=dn, dtype=dtype)
+    np.maximum(dn, dtype.type(threshold_dn), out=res)
     np.log(res, out=res)
     if threshold_dn > math.e:
-        dn *= k
+        dn *= dtype.type(k)
         if out is None:
-            out = np.empty(shape, np.float64)
-        return np.minimum(res, dn, out=out, casting="same_kind")
-    high = np.greater(dn, threshold_dn).astype(np.float64)
+            out = np.empty(shape, dtype)
+        return np.minimum(res, dn, out=out)
+    high = np.greater(dn, dtype.type(threshold_dn)).astype(dtype)
     res *= high
     np.subtract(1.0, high, out=high)
-    dn *= k
+    dn *= dtype.type(k)
     dn *= high
     res += dn
     if out is None:

@@ -69,6 +69,7 @@ class EventSimulator:
         self.t_prev_us: int | None = None
         self.n_frames = 0
         self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
+        self._linlog_scratch: dict[np.dtype, np.ndarray] = {}
         if c.has_lowpass or c.has_leak:
             self._level_bufs = [np.empty(P), np.empty(P)]
             self._scratch = np.empty(P)
@@ -112,10 +113,11 @@ class EventSimulator:
         frame_flat = frame_flat.astype(dtype, copy=False)
         if c.log_mode == "log":
             return pixel.log_response(frame_flat, dtype(c.log_eps), out=out)
-        if getattr(self, "_linlog_scratch", None) is None:
-            self._linlog_scratch = np.empty((2, self.n_pixels), np.float64)
+        scratch = self._linlog_scratch.get(np.dtype(dtype))
+        if scratch is None:
+            scratch = self._linlog_scratch[np.dtype(dtype)] = np.empty((2, self.n_pixels), dtype)
         return pixel.linlog_response(frame_flat, c.linlog_threshold_dn, c.linlog_dn_per_unit, out=out,
-                                     scratch=self._linlog_scratch)
+                                     scratch=scratch)
 
     # -- simulation -------------------------------------------------------------------------
     def push(self, frame: np.ndarray, t_us: int) -> np.ndarray:

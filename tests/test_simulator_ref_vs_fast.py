@@ -98,17 +98,20 @@ def test_fast_linlog_equals_the_reference(threshold_dn, dtype):
     inten[1, :5] = threshold_dn / 255.0                      # on the knee
     inten[2, :5] = np.nextafter(dtype(threshold_dn / 255.0), dtype(1.0))
     ref = linlog_response_ref(inten, threshold_dn, 255.0)
-    scratch = np.full((2,) + inten.shape, np.nan)
+    scratch = np.full((2,) + inten.shape, np.nan, dtype)
     out = np.empty_like(inten)
     fast = linlog_response(inten, threshold_dn, 255.0, out=out, scratch=scratch)
-    assert fast is out
-    # the min form may differ from the reference by an ulp at DN == thr, nowhere else
-    np.testing.assert_allclose(fast, ref.astype(dtype), rtol=2 * np.finfo(dtype).eps, atol=0)
-    assert np.count_nonzero(fast != ref.astype(dtype)) <= 5
+    assert fast is out and fast.dtype == dtype        # computed in out's precision, like log_response
+    # float64: the min form may differ from the reference by an ulp at DN == thr, nowhere else;
+    # float32: rounding of float32 arithmetic (a few ulps)
+    np.testing.assert_allclose(fast, ref.astype(dtype), rtol=4 * np.finfo(dtype).eps, atol=4 * np.finfo(dtype).eps)
+    if dtype == np.float64:
+        assert np.count_nonzero(fast != ref) <= 5
     assert np.all(fast[0, :5] == 0.0)                        # exactly zero in the dark
-    again = linlog_response(inten, threshold_dn, 255.0, scratch=scratch)
+    scratch64 = np.zeros((2,) + inten.shape)
+    again = linlog_response(inten, threshold_dn, 255.0, scratch=scratch64)
     assert again.dtype == np.float64
-    np.testing.assert_array_equal(again.astype(dtype), fast)
+    np.testing.assert_allclose(again, ref, rtol=2e-16, atol=0)
     again[...] = -1.0                                        # the result is not the caller's scratch
-    assert not np.shares_memory(again, scratch)
+    assert not np.shares_memory(again, scratch64)
     np.testing.assert_allclose(linlog_response(inten, threshold_dn, 255.0), ref, rtol=2e-16, atol=0)
