@@ -197,8 +197,9 @@ def worker(threads: int) -> None:
 class Tree:
     def __init__(self, label: str, root: Path, threads: int):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
-                   NUMBA_NUM_THREADS=str(max(threads, 1)), E4DGS_BENCH_TREE=str(root),
-                   NUMBA_CACHE_DIR=str(root / ".numba-cache"))
+                   NUMBA_NUM_THREADS=str(max(threads, 1)), E4DGS_BENCH_TREE=str(root))
+        if root != REPO:   # an older tree's compiled kernels stay in its temporary folder
+            env["NUMBA_CACHE_DIR"] = str(root / ".numba-cache")
         self.label, self.root = label, root
         # this file runs in every tree (-P: its own folder stays off sys.path, the tree's packages are found)
         self.proc = subprocess.Popen([sys.executable, "-P", __file__, "--worker", str(threads)], cwd=root, env=env,
