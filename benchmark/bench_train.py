@@ -222,8 +222,11 @@ class Tree:
 def checkout(rev: str):
     """The tree of git revision `rev` in a temporary folder (git archive: no working-tree changes)."""
     with tempfile.TemporaryDirectory(prefix="bench_train_") as tmp:
-        archive = subprocess.run(["git", "-C", str(REPO), "archive", rev], check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        got = subprocess.run(["git", "-C", str(REPO), "archive", rev], capture_output=True)
+        if got.returncode != 0:
+            raise SystemExit(f"bench_train: --against {rev}: not a revision of {REPO} "
+                             f"({got.stderr.decode(errors='replace').strip()})")
+        subprocess.run(["tar", "-x", "-C", tmp], input=got.stdout, check=True)
         yield Path(tmp)
 
 
