@@ -41,10 +41,11 @@ def make_scene(n: int, seed: int = 0):
 
 def make_early_scene(n: int, seed: int = 0):
     from recon.gaussians import nearest_neighbour_scale
+    from recon.init import random_cube
 
-    g = torch.Generator().manual_seed(seed)
-    means = (torch.rand(n, 3, generator=g) - 0.5) * (2 * 0.35 * 3.8)
-    scales = torch.from_numpy(nearest_neighbour_scale(means.numpy()))[:, None].expand(-1, 3).contiguous()
+    points = random_cube(n, 0.35 * 3.8, seed=seed)      # the methods' object initialisation
+    means = torch.from_numpy(points)
+    scales = torch.from_numpy(nearest_neighbour_scale(points))[:, None].expand(-1, 3).contiguous()
     quats = torch.tensor([1.0, 0.0, 0.0, 0.0]).repeat(n, 1)
     opac = torch.full((n,), 0.1)
     colors = torch.full((n, 1), 0.5)

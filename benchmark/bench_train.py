@@ -123,30 +123,25 @@ def _first_layer_node(root, weight):
 
 
 def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
-    import numpy as np
     import torch
 
     import recon
     from datagen.dataset import SceneDataset
+    from recon.config import E4DGSConfig
     from recon.methods import get_method
+    from recon.methods.e4dgs import E4DGS
     from recon.trainer import Trainer
-    from recon.views import dataset_camera
 
-    key = "n_points_object"
     cfg = recon.resolve_config(method, str(REPO_OF_TREE / CONFIGS[method]),
-                               overrides={f"train.init.{key}": n, "train.init.n_points_room": n})
+                               overrides={"train.init.n_points_object": n, "train.init.n_points_room": n})
     ds = SceneDataset(scene)
     trainer = Trainer(get_method(method)(ds, cfg), out, progress=False)
     trainer.setup()
     model = trainer.model
-    if phase == "late":
+    if phase == "late":   # E-4DGS's intensity-importance pruning, whatever the method
+        iip = E4DGS.for_evaluation(ds, E4DGSConfig())
         with torch.no_grad():
-            w = torch.zeros(len(model))
-            for k in range(ds.n_cameras):
-                for t in np.linspace(0.0, 1.0, 5):
-                    cam = dataset_camera(ds, k, int(round(t * ds.duration_us)))
-                    w = torch.maximum(w, model.render_output(cam, float(t), "cpu").max_weight)
-        model.gaussians.prune(w >= 0.015)
+            model.gaussians.prune(iip.importance(model) >= iip.cfg.events.iip_threshold)
         trainer.optimizer = trainer._optimizer()
     for group in trainer.optimizer.param_groups:
         group["lr"] = 0.0

@@ -166,6 +166,7 @@ class E4DGS(Method):
 
     def step(self, trainer, iteration: int):
         e = self.cfg.events
+        # one view draws exactly what it always did (sample_views also draws a camera order)
         windows = [self.sampler.sample(trainer.rng)] if e.views_per_step == 1 else \
             self.sampler.sample_views(trainer.rng, e.views_per_step)
         loss, renders = self.event_loss(trainer, windows)

@@ -33,15 +33,13 @@ _opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
 
 @numba.njit(**_opts)
-def _gaussian_setup(a, b, c, opacity):
+def _gaussian_setup(a, b, c, k):
     """Per-Gaussian constants of the row scan: the quadratic's coefficients.
 
-    Alpha can reach 1/255 where power >= pmin = log(1 / (255 opacity)); for a row at offset dy that
-    is a dx^2 + 2 b dy dx + (c dy^2 + 2 pmin) <= 0, with discriminant k1 dy^2 + k2.
+    Alpha can reach 1/255 where d^T Q d <= k = 2 log(255 opacity); for a row at offset dy that is
+    a dx^2 + 2 b dy dx + (c dy^2 - k) <= 0, with discriminant k1 dy^2 + k2 (k1 = b^2 - a c, k2 = a k).
     """
-    ok = opacity >= ALPHA_MIN and a > 0.0
-    pmin = math.log(ALPHA_MIN / opacity) if ok else 0.0
-    return ok, b * b - a * c, -2.0 * a * pmin, 1.0 / a if ok else 0.0
+    return b * b - a * c, a * k, 1.0 / a
 
 
 @numba.njit(parallel=True, **_opts)
@@ -52,7 +50,7 @@ def footprints(means2d, conics, radii, opacities, width, height):
     sqrt(k (Q^-1)_xx) and sqrt(k (Q^-1)_yy), widened by 1e-3 px against rounding.
 
     Also returns the row scan's constants [N, 4] (k1, k2, 1/a, exp(-a): see `_gaussian_setup`), so
-    the tiles do not recompute a log and an exp per Gaussian each.
+    the tiles do not recompute a log and an exp per Gaussian each; k serves both.
     """
     n = means2d.shape[0]
     boxes = np.empty((n, 4), np.int64)
@@ -63,12 +61,12 @@ def footprints(means2d, conics, radii, opacities, width, height):
         r = float(radii[g])
         if radii[g] <= 0 or not (op >= ALPHA_MIN and a > 0.0):
             continue
-        _, consts[g, 0], consts[g, 1], consts[g, 2] = _gaussian_setup(a, b, c, op)
+        k = 2.0 * math.log(op / ALPHA_MIN)
+        consts[g, 0], consts[g, 1], consts[g, 2] = _gaussian_setup(a, b, c, k)
         consts[g, 3] = math.exp(-a)
         hx = hy = r
         det = a * c - b * b
         if det > 0.0:
-            k = 2.0 * math.log(op / ALPHA_MIN)
             hx = min(r, math.sqrt(k * c / det) + 1e-3)
             hy = min(r, math.sqrt(k * a / det) + 1e-3)
         mx, my = means2d[g, 0], means2d[g, 1]
