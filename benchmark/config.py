@@ -45,6 +45,13 @@ class AblationStudy:
     switches: dict[str, dict[str, Any]] = field(default_factory=lambda: {
         "w/o TV": {"events.lambda_tv": 0.0}, "w/o ESS": {"events.ess": False},
         "w/o AES": {"events.aes": False}, "w/o IIP": {"events.iip": False}})
+    # training seeds (train.seed) of every variant and of the full method; the table gives their mean
+    # and spread. Seed 0 is the configs' default, so the full method's seed-0 run is the main cell's.
+    seeds: tuple[int, ...] = (0,)
+
+    def __post_init__(self):
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds) or min(self.seeds) < 0:
+            raise ConfigError(f"ablation.seeds: expected distinct seeds >= 0, got {list(self.seeds)!r}")
 
 
 @dataclass(frozen=True)
@@ -89,10 +96,12 @@ class Job:
     method: str
     config: str
     overrides: dict[str, Any]
+    seed: int | None = None   # ablation runs: the training seed (part of the key)
 
     @property
     def key(self) -> str:
-        return "/".join(p for p in (self.study, self.scene, self.cell, self.variant) if p)
+        seed = f"seed{self.seed}" if self.seed is not None else ""
+        return "/".join(p for p in (self.study, self.scene, self.cell, self.variant, seed) if p)
 
     @property
     def run_name(self) -> str:
@@ -127,8 +136,11 @@ def jobs(cfg: BenchConfig) -> list[Job]:
     a = cfg.ablation
     if a.scene:
         c = cfg.cells[a.base]
-        for variant, switch in a.switches.items():
-            out.append(Job("ablation", a.scene, a.base, variant, c.method, c.config, {**c.overrides, **switch}))
+        for seed in a.seeds:
+            seeded = {"train.seed": seed} if seed != 0 else {}
+            for variant, switch in [("full", {})] + list(a.switches.items()):
+                out.append(Job("ablation", a.scene, a.base, variant, c.method, c.config,
+                               {**c.overrides, **switch, **seeded}, seed))
     return out
 
 

@@ -109,6 +109,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
         "key": job.key, "study": job.study, "scene": job.scene, "cell": job.cell, "variant": job.variant,
+        "seed": job.seed,
         "method": job.method, "config": job.config, "overrides": job.overrides, "config_hash": job.config_hash(),
         "run_dir": str(run_dir.relative_to(out_root)),
         **{k: final[k] for k in ("psnr", "ssim", "lpips")}, "n_test_images": final["n_images"],

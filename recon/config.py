@@ -28,8 +28,12 @@ MIN_WARM_UP = 200
 class InitConfig:
     """Initial points. `auto`: a cube for object scenes, a dense-to-sparse sphere for rooms (the scene
     kind comes from the dataset's scene.yaml). Sizes `null` mean: cube half size 0.35 x the camera
-    rig's radius, sphere radius 10 (the paper's), both centred on the rig's target."""
-    kind: Literal["auto", "cube", "sphere", "points"] = "auto"
+    rig's radius, sphere radius 10 (the paper's), both centred on the rig's target. `events`: the
+    auto volume carved by the cameras' event activity (recon.event_init): `carve_candidates` points
+    of it are tested at `carve_times` instants, each against every camera's events within
+    `carve_window` (a fraction of the clip), pixels active with >= `carve_min_events` events in
+    their 3x3 neighbourhood, grown by `carve_dilate_px`."""
+    kind: Literal["auto", "cube", "sphere", "points", "events"] = "auto"
     n_points_object: int = 100_000
     n_points_room: int = 200_000
     cube_half_size: float | None = None
@@ -37,9 +41,19 @@ class InitConfig:
     points_file: str | None = None   # .npy or .ply-free [N, 3] float array, for kind: points
     init_opacity: float = 0.1
     seed: int = 0
+    carve_candidates: int = 200_000
+    carve_times: int = 9
+    carve_window: float = 0.01      # quick hinge, untrained model: 0.1 / 3 px 27.99 dB, 0.03 / 2 px 28.37,
+    carve_min_events: int = 2       # 0.01 / 1 px 28.72 (the shorter the window, the less the motion
+    carve_dilate_px: int = 1        # smears the silhouettes; docs/e4dgs.md)
 
     def __post_init__(self):
-        check_positive(self, "n_points_object", "n_points_room")
+        check_positive(self, "n_points_object", "n_points_room", "carve_candidates", "carve_times",
+                       "carve_min_events")
+        if not 0 < self.carve_window <= 1:
+            raise ConfigError(f"carve_window: expected a fraction of the clip in (0, 1], got {self.carve_window!r}")
+        if self.carve_dilate_px < 0:
+            raise ConfigError(f"carve_dilate_px: expected a value >= 0, got {self.carve_dilate_px!r}")
         if not 0 < self.init_opacity < 1:
             raise ConfigError(f"init_opacity: expected a value in (0, 1), got {self.init_opacity!r}")
         if self.kind == "points" and not self.points_file:
@@ -55,9 +69,18 @@ class LearningRates:
     position_delay_mult: float = 0.01
     feature: float = 0.0025          # SH degree 0; higher degrees use feature / 20
     opacity: float = 0.05
+    opacity_final: float | None = None   # None: constant; else log-linear decay to it over the run
     scaling: float = 0.001
     rotation: float = 0.001
     deform_scale: float = 5.0
+
+    def __post_init__(self):
+        for name in ("position_init", "position_final", "position_delay_mult", "feature", "opacity", "scaling",
+                     "rotation", "deform_scale"):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"lr.{name}: expected a learning rate >= 0, got {getattr(self, name)!r}")
+        if self.opacity_final is not None and not self.opacity_final > 0:
+            raise ConfigError(f"lr.opacity_final: expected a value > 0 (or null), got {self.opacity_final!r}")
 
 
 @dataclass(frozen=True)
@@ -175,6 +198,9 @@ class EventConfig:
     c_init: float = 0.15
     c_lr: float = 1e-3                 # Adam rate on log C_hat
     recon_eps: float = 1e-3
+    # the event loss averaged over count maps pooled in s x s blocks (recon.events.multiscale_recon_loss);
+    # (1,) is the paper's per-pixel loss
+    loss_scales: tuple[int, ...] = (1,)
     lambda_recon: float = 1.0
     lambda_tv: float = 0.005           # 0 switches TV off
     # IIP: prune Gaussians whose largest alpha x transmittance over the training cameras at iip_times
@@ -197,6 +223,8 @@ class EventConfig:
             raise ConfigError(f"window_fraction: expected 0 < min <= max <= 1, got {[lo, hi]}")
         check_positive(self, "c_init", "recon_eps", "iip_interval", "iip_times", "max_window_fraction",
                        "views_per_step")
+        if not self.loss_scales or any(not isinstance(s, int) or s < 1 for s in self.loss_scales):
+            raise ConfigError(f"loss_scales: expected block sizes >= 1 (pixels), got {list(self.loss_scales)!r}")
         if self.noise_sigma < 0 or self.lambda_tv < 0 or self.lambda_recon < 0:
             raise ConfigError("noise_sigma, lambda_tv, lambda_recon: expected values >= 0")
 

@@ -32,3 +32,42 @@ def from_point_cloud(points, n_max: int | None = None, seed: int = 0) -> np.ndar
     if n_max is not None and len(pts) > n_max:
         pts = pts[np.random.default_rng(seed).choice(len(pts), n_max, replace=False)]
     return pts
+
+
+def carve(points: np.ndarray, views: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+          min_views: int = 2) -> np.ndarray:
+    """Space carving: which points every camera that sees them agrees on.
+
+    points [M, 3] world; views: (K [3, 3], world_to_cam [4, 4] OpenCV axes, active [H, W] bool), all
+    taken at one instant. A point is kept when it projects inside the image of at least `min_views`
+    of the views (in front of the camera) and onto an active pixel in every one of them.
+    Returns keep [M] bool.
+    """
+    pts = np.asarray(points, np.float64)
+    seen = np.zeros(len(pts), np.int32)
+    missed = np.zeros(len(pts), bool)
+    for K, w2c, active in views:
+        cam = pts @ np.asarray(w2c, np.float64)[:3, :3].T + np.asarray(w2c, np.float64)[:3, 3]   # [M, 3]
+        z = cam[:, 2]
+        front = z > 1e-6
+        uv = cam[:, :2] / np.where(front, z, 1.0)[:, None] @ np.asarray(K, np.float64)[:2, :2].T + \
+            np.asarray(K, np.float64)[:2, 2]                                                       # [M, 2] px
+        h, w = active.shape
+        u, v = np.floor(uv[:, 0]).astype(np.int64), np.floor(uv[:, 1]).astype(np.int64)
+        inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        hit = np.zeros(len(pts), bool)
+        hit[inside] = active[v[inside], u[inside]]
+        seen += inside
+        missed |= inside & ~hit
+    return (seen >= min_views) & ~missed
+
+
+def sample_kept(candidates: np.ndarray, keep: np.ndarray, n: int, jitter: float, seed: int = 0) -> np.ndarray:
+    """n points drawn from the kept candidates [M, 3] (with replacement when fewer), each moved by a
+    uniform offset in [-jitter, jitter]^3 so repeated draws do not coincide. [n, 3] float32."""
+    kept = np.asarray(candidates, np.float64)[np.asarray(keep, bool)]
+    if len(kept) == 0:
+        raise ValueError("no candidate point is kept")
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(len(kept), n, replace=len(kept) < n)
+    return (kept[idx] + rng.uniform(-jitter, jitter, size=(n, 3))).astype(np.float32)

@@ -13,6 +13,7 @@ A method supplies the loss (`Method.step`) and its data; the trainer does the re
 from __future__ import annotations
 
 import hashlib
+from dataclasses import replace
 import math
 import json
 import time
@@ -29,6 +30,7 @@ from e4dgs.fileio import atomic_output, write_text_atomic
 from recon import init as initial
 from recon.config import TrainConfig
 from recon.deform import DeformationField
+from recon.event_init import carved_points
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
 from recon.evaluate import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
@@ -114,7 +116,15 @@ def scene_background(dataset: SceneDataset, channels: int) -> list[float]:
 def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
     ic = cfg.init
     rig = dataset.config.camera
-    kind = ic.kind if ic.kind != "auto" else ("cube" if dataset.config.kind == "object" else "sphere")
+    auto = "cube" if dataset.config.kind == "object" else "sphere"
+    kind = ic.kind if ic.kind != "auto" else auto
+    if kind == "events":
+        n = ic.n_points_object if auto == "cube" else ic.n_points_room
+        candidates = initial_points(dataset, replace(cfg, init=replace(ic, kind=auto, n_points_object=ic.carve_candidates,
+                                                                        n_points_room=ic.carve_candidates)))
+        pts, _ = carved_points(dataset, candidates, n, ic.carve_times, ic.carve_window, ic.carve_min_events,
+                               ic.carve_dilate_px, ic.seed)
+        return pts
     if kind == "cube":
         half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * rig.radius
         return initial.random_cube(ic.n_points_object, half, rig.target, ic.seed)
@@ -199,6 +209,8 @@ class Trainer:
             if group["name"] == "means":
                 group["lr"] = position_lr(it, lr.position_init * self.extent, lr.position_final * self.extent,
                                           self.sched.position_lr_steps)
+            elif group["name"] == "opacity" and lr.opacity_final is not None:
+                group["lr"] = position_lr(it, lr.opacity, lr.opacity_final, self.tcfg.iterations)
             elif group["name"] == "deform":  # decays over the iterations after the warm-up
                 warm = self.sched.warm_up
                 group["lr"] = position_lr(it - warm, lr.position_init * lr.deform_scale, lr.position_final,

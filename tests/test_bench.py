@@ -128,7 +128,7 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
     assert not set(resumed) & set(calls)                     # finished jobs are reused, not retrained
     keys = {r["key"] for r in rows}
     assert {f"main/{motion_scene.name}/{c}" for c in MAIN_CELLS} <= keys
-    assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES" in keys
+    assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES/seed0" in keys
     assert not any(k.startswith("blur/") and "/e4dgs/" in k for k in keys)   # events-only: blur cannot matter
     for r in rows:
         assert r["iterations"] == 12 and np.isfinite([r["psnr"], r["ssim"], r["lpips"]]).all()
@@ -141,9 +141,9 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
 
 # ---------------------------------------------------------------- reports from stored rows
 
-def _row(study, scene, cell, psnr_db, variant="", ssim_v=0.9, lpips_v=0.1):
-    return {"key": "/".join(p for p in (study, scene, cell, variant) if p), "study": study, "scene": scene,
-            "cell": cell, "variant": variant, "psnr": psnr_db, "ssim": ssim_v, "lpips": lpips_v, "iterations": 10,
+def _row(study, scene, cell, psnr_db, variant="", ssim_v=0.9, lpips_v=0.1, seed=None):
+    return {"key": "/".join(p for p in (study, scene, cell, variant, "" if seed is None else f"seed{seed}") if p),
+            "study": study, "scene": scene, "cell": cell, "variant": variant, "seed": seed, "psnr": psnr_db, "ssim": ssim_v, "lpips": lpips_v, "iterations": 10,
             "wall_s": 100.0, "n_gaussians": 1000, "snapshots": [{"iteration": 5, "wall_s": 50.0, "psnr": psnr_db - 1},
                                                               {"iteration": 10, "wall_s": 100.0, "psnr": psnr_db}]}
 
@@ -154,7 +154,8 @@ def test_report_from_stored_results(tmp_path):
         for k, cell in enumerate(MAIN_CELLS):
             rows.append(_row("main", scene, cell, base + k, lpips_v=0.5 - 0.1 * k))
     rows += [_row("blur", "a", "d3dgs_blur", 19.0, "mild"), _row("blur", "a", "d3dgs_blur", 17.0, "strong"),
-             _row("ablation", "a", "e4dgs", 21.5, "w/o TV")]
+             _row("ablation", "a", "e4dgs", 22.0, "full", seed=0), _row("ablation", "a", "e4dgs", 24.0, "full", seed=1),
+             _row("ablation", "a", "e4dgs", 21.0, "w/o TV", seed=0), _row("ablation", "a", "e4dgs", 22.0, "w/o TV", seed=1)]
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     write_report(read_results(tmp_path / "results.jsonl"), tmp_path, "# title")
     md = (tmp_path / "leaderboard.md").read_text()
@@ -168,8 +169,29 @@ def test_report_from_stored_results(tmp_path):
     assert csv_lines[0].startswith("method,label,a_psnr") and len(csv_lines) == 6
     blur = (tmp_path / "blur.md").read_text()
     assert "19.00" in blur and "17.00" in blur and "23.00" in blur       # events-only row from the main run
-    assert "w/o TV" in (tmp_path / "ablation.md").read_text()
+    ablation = (tmp_path / "ablation.md").read_text()
+    full = next(l for l in ablation.splitlines() if l.startswith("| full |"))
+    no_tv = next(l for l in ablation.splitlines() if l.startswith("| w/o TV |"))
+    assert "| 2 | 23.00 ± 1.41 |" in full                         # mean ± sample std over the seeds
+    assert "| 2 | 21.50 ± 0.71 | -1.50 |" in no_tv
     assert "5 @ 50 s → 19.00" in (tmp_path / "accuracy_vs_time.md").read_text()
+
+
+def test_ablation_seeds_vary_only_the_training_seed_and_seed_0_is_the_main_run():
+    cells = {c: CellSpec("e4dgs" if c.startswith("e4dgs") else "d3dgs") for c in MAIN_CELLS}
+    cfg = build_config(BenchConfig, {"scenes": ["s"], "cells": cells,
+                                     "ablation": {"scene": "s", "seeds": [0, 3],
+                                                  "switches": {"w/o AES": {"events.aes": False}}}})
+    abl = [j for j in jobs(cfg) if j.study == "ablation"]
+    assert sorted(j.key for j in abl) == ["ablation/s/e4dgs/full/seed0", "ablation/s/e4dgs/full/seed3",
+                                          "ablation/s/e4dgs/w/o AES/seed0", "ablation/s/e4dgs/w/o AES/seed3"]
+    by = {j.key: j for j in abl}
+    assert by["ablation/s/e4dgs/w/o AES/seed3"].overrides == {"events.aes": False, "train.seed": 3}
+    assert by["ablation/s/e4dgs/w/o AES/seed0"].overrides == {"events.aes": False}
+    main = next(j for j in jobs(cfg) if j.key == "main/s/e4dgs")
+    assert by["ablation/s/e4dgs/full/seed0"].config_hash() == main.config_hash()   # trained once
+    with pytest.raises(ConfigError, match="ablation.seeds"):
+        build_config(BenchConfig, {"scenes": ["s"], "cells": cells, "ablation": {"scene": "s", "seeds": [1, 1]}})
 
 
 def test_report_refuses_empty_results(tmp_path):

@@ -94,6 +94,25 @@ def test_event_loss_and_gradients_stay_finite(case, rng):
         assert float(n_pred.detach().abs().max()) == 0.0
 
 
+def test_multiscale_loss_compares_block_means_of_the_counts():
+    n_gt = torch.zeros(8, 12)
+    n_gt[0::2, 0::2] = 2.0            # a texture whose 2x2 blocks each hold one 2-count pixel
+    pred_flat = torch.full((8, 12), 0.5, requires_grad=True)    # the block mean, unresolved texture
+    eps = 1e-3
+    fine = ev.multiscale_recon_loss(n_gt, pred_flat, (1,), eps)
+    assert fine.item() == pytest.approx(ev.recon_loss(n_gt, pred_flat, eps).item())
+    assert fine.item() == pytest.approx((1.5 + 3 * 0.5) / 4, abs=1e-5)
+    coarse = ev.multiscale_recon_loss(n_gt, pred_flat, (2,), eps)
+    assert coarse.item() == pytest.approx(eps, rel=1e-3)          # block means agree: only eps is left
+    both = ev.multiscale_recon_loss(n_gt, pred_flat, (1, 2), eps)
+    assert both.item() == pytest.approx((fine.item() + coarse.item()) / 2)
+    # a wrong overall level is seen at every scale; 5x5 blocks do not divide 8x12 and still average
+    off = torch.full((8, 12), 1.5)
+    assert ev.multiscale_recon_loss(n_gt, off, (5,), eps).item() > 0.5
+    both.backward()
+    assert torch.isfinite(pred_flat.grad).all()
+
+
 def test_linlog_response_matches_the_simulator():
     from simulator.pixel import linlog_response
 

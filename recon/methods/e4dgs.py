@@ -148,7 +148,7 @@ class E4DGS(Method):
             de, hits = ev.event_maps(window.x, window.y, window.p, intr.width, intr.height, self.c_pos, self.c_neg)
             n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0, trainer.rng))
             n_pred = ev.predicted_counts(self.log_intensity(out_s.image), self.log_intensity(out_e.image), self.c_hat)
-            loss = loss + e.lambda_recon * ev.recon_loss(n_gt, n_pred, e.recon_eps)
+            loss = loss + e.lambda_recon * ev.multiscale_recon_loss(n_gt, n_pred, e.loss_scales, e.recon_eps)
             if e.lambda_tv > 0:
                 loss = loss + e.lambda_tv * ev.tv_loss(out_e.image)
         renders = list(zip(outs_s, cams_s)) + list(zip(outs_e, cams_e))
