@@ -15,6 +15,8 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--methods", default=None, help="comma-separated subset of cells (d3dgs_sharp, d3dgs_blur, "
                                                    "e2vid_d3dgs, e4dgs, e4dgs_rgb)")
     p.add_argument("--studies", default="main,blur,ablation", help="which studies to run (default all)")
+    p.add_argument("--ablation-seeds", default=None,
+                   help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")
     p.add_argument("--data", type=Path, default=None, help="dataset root (default data/<dataset>)")
     p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<preset>)")
     p.add_argument("--report", action="store_true", help="only regenerate tables and plots from results.jsonl")
@@ -33,6 +35,14 @@ def run_bench_cli(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         raise SystemExit(f"error: {exc}") from None
     name = Path(args.preset).stem
+    if args.ablation_seeds:
+        from dataclasses import replace
+        try:
+            seeds = tuple(int(s) for s in args.ablation_seeds.split(",") if s.strip())
+            cfg = replace(cfg, ablation=replace(cfg.ablation, seeds=seeds))
+        except (ValueError, ConfigError) as exc:
+            raise SystemExit(f"error: --ablation-seeds: expected distinct integers >= 0 separated by commas "
+                             f"({exc})") from None
     out = args.out or Path("runs") / name
     split = lambda s: [x.strip() for x in s.split(",") if x.strip()] if s else None  # noqa: E731
     scenes, cells = split(args.scenes), split(args.methods)

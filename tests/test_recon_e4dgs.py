@@ -172,3 +172,46 @@ def test_multi_view_step_supervises_the_same_time_window_on_distinct_cameras(mot
     assert tr.model.gaussians.means.grad.abs().sum() > 0
     with pytest.raises(ValueError, match="views_per_step"):
         trainer_for(motion_scene, tmp_path / "x", **{"events.views_per_step": 3})
+
+
+def test_loss_scales_switch_pools_the_count_maps_and_scale_1_is_the_paper_loss(motion_scene, tmp_path):
+    from recon import events as ev
+
+    base = {"events.ess": False, "events.lambda_tv": 0.0}
+    px = trainer_for(motion_scene, tmp_path / "px", **base)
+    pooled = trainer_for(motion_scene, tmp_path / "pool", **base, **{"events.loss_scales": [1, 4]})
+    pooled.model = px.model
+    win = px.method.sampler.sample(np.random.default_rng(2))
+    a, renders = px.method.event_loss(px, [win])
+    b, _ = pooled.method.event_loss(pooled, [win])
+    # rebuild both terms by hand from the same renders
+    intr = px.dataset.intrinsics
+    de, hits = ev.event_maps(win.x, win.y, win.p, intr.width, intr.height, px.method.c_pos, px.method.c_neg)
+    n_gt = torch.from_numpy(ev.gt_counts(de, hits, px.method.c_ref, 0.0, None))
+    n_pred = ev.predicted_counts(px.method.log_intensity(renders[0][0].image),
+                                 px.method.log_intensity(renders[1][0].image), px.method.c_hat)
+    fine = ev.recon_loss(n_gt, n_pred)
+    coarse = ev.recon_loss(*(torch.nn.functional.avg_pool2d(m[None, None], 4, ceil_mode=True)[0, 0]
+                             for m in (n_gt, n_pred)))
+    assert a.item() == pytest.approx(fine.item(), rel=1e-5)
+    assert b.item() == pytest.approx((fine.item() + coarse.item()) / 2, rel=1e-5)
+    assert coarse.item() < fine.item()
+    with pytest.raises(Exception, match="loss_scales"):
+        recon.resolve_config("e4dgs", overrides={"events.loss_scales": [0]})
+
+
+def test_opacity_learning_rate_decays_to_its_final_value_only_when_set(motion_scene, tmp_path):
+    decay = trainer_for(motion_scene, tmp_path / "d", **{"train.iterations": 100, "train.lr.opacity": 0.05,
+                                                         "train.lr.opacity_final": 0.005})
+    const = trainer_for(motion_scene, tmp_path / "c", **{"train.iterations": 100, "train.lr.opacity": 0.05})
+    lr = {}
+    for tr, name in ((decay, "d"), (const, "c")):
+        for it in (1, 50, 100):
+            tr._update_lrs(it)
+            lr[name, it] = next(g["lr"] for g in tr.optimizer.param_groups if g["name"] == "opacity")
+    assert lr["d", 100] == pytest.approx(0.005) and lr["d", 50] == pytest.approx(math.sqrt(0.05 * 0.005), rel=0.03)
+    assert lr["c", 1] == lr["c", 50] == lr["c", 100] == pytest.approx(0.05)
+    with pytest.raises(Exception, match="lr.opacity_final"):
+        recon.resolve_config("e4dgs", overrides={"train.lr.opacity_final": 0.0})
+    with pytest.raises(Exception, match="lr.feature"):
+        recon.resolve_config("e4dgs", overrides={"train.lr.feature": -1.0})
