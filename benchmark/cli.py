@@ -13,7 +13,7 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--preset", default="quick", help="quick | paper, or a bench YAML file (default quick)")
     p.add_argument("--scenes", default=None, help="comma-separated subset of the preset's scenes")
     p.add_argument("--methods", default=None, help="comma-separated subset of cells (d3dgs_sharp, d3dgs_blur, "
-                                                   "e2vid_d3dgs, e4dgs, e4dgs_rgb)")
+                                                   "deblur_d3dgs, e2vid_d3dgs, e4dgs, e4dgs_rgb)")
     p.add_argument("--studies", default="main,blur,ablation", help="which studies to run (default all)")
     p.add_argument("--ablation-seeds", default=None,
                    help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")

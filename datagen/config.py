@@ -169,7 +169,9 @@ class SceneConfig:
     sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
 
     def __post_init__(self):
-        check_positive(self, "duration_s", "motion_strength")
+        check_positive(self, "duration_s")
+        if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
+            raise ConfigError(f"motion_strength: expected a value >= 0, got {self.motion_strength!r}")
 
     @property
     def n_timestamps(self) -> int:

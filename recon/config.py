@@ -176,6 +176,31 @@ class D3DGSConfig:
 
 
 @dataclass(frozen=True)
+class DeblurD3DGSConfig:
+    """Deblur-D3DGS (the Deblur4DGS blur model on the D3DGS representation): trained on the frames of
+    blur level `frames`, each predicted as the mean in linear light of `blur_samples` renders spread
+    over its exposure (recon.events.exposure_mean), plus Deblur4DGS's multi-resolution consistency:
+    lambda_lowres x L1 between the render at the exposure centre and the blurred frame, both
+    area-averaged over lowres_factor x lowres_factor blocks (blur moves little at that scale)."""
+    frames: str = "medium"
+    blur_samples: int = 5
+    lambda_dssim: float = 0.2
+    lambda_lowres: float = 1.0
+    lowres_factor: int = 4
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def __post_init__(self):
+        check_positive(self, "blur_samples", "lowres_factor")
+        if self.blur_samples % 2 == 0:
+            raise ConfigError(f"blur_samples: expected an odd count (the middle render is the sharp frame at the "
+                              f"exposure centre), got {self.blur_samples}")
+        if self.frames == "sharp":
+            raise ConfigError("frames: Deblur-D3DGS trains on a blur level (mild, medium, strong), not 'sharp'")
+        if self.lambda_lowres < 0 or not 0 <= self.lambda_dssim <= 1:
+            raise ConfigError("lambda_lowres, lambda_dssim: expected lambda_lowres >= 0 and lambda_dssim in [0, 1]")
+
+
+@dataclass(frozen=True)
 class EventConfig:
     """E-4DGS's event supervision. Every component has a switch for the paper's ablations."""
     # ESS: N uniform in a range. window_scale "rate": the range is window_fraction of each camera's

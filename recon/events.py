@@ -58,6 +58,14 @@ def linear_to_srgb_t(v: torch.Tensor) -> torch.Tensor:
     return torch.where(v <= 0.0031308, 12.92 * v, 1.055 * v.clamp_min(0.0031308) ** (1 / 2.4) - 0.055)
 
 
+def exposure_mean(images: list[torch.Tensor]) -> torch.Tensor:
+    """A blurred frame from renders [H, W, C] (sRGB-encoded) spread over its exposure: the mean in linear
+    light, re-encoded (how the dataset made its blurred frames). One render is returned as is."""
+    if len(images) == 1:
+        return images[0]
+    return linear_to_srgb_t(torch.stack([srgb_to_linear_t(im) for im in images]).mean(0))
+
+
 def luminance_t(linear: torch.Tensor) -> torch.Tensor:
     """[H, W, C] linear -> [H, W] (C = 1: itself; C = 3: Rec.709 luma)."""
     if linear.shape[-1] == 1:

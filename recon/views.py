@@ -2,7 +2,10 @@
 trajectories, and images in the channels a model predicts (sRGB-encoded, as the dataset stores them)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+import torch
 
 from datagen.dataset import DatasetError, FrameRecord, SceneDataset
 from recon.raster import Camera
@@ -34,3 +37,27 @@ def load_frame(dataset: SceneDataset, rec: FrameRecord, channels: int) -> np.nda
         return img
     img = dataset.load_image(rec.gray_path) if rec.gray_path is not None else dataset.load_image(rec.path)
     return (gray_from_srgb(img) if img.ndim == 3 else img)[..., None]
+
+
+@dataclass
+class BlurView:
+    """A blurred training frame and where to render it: one camera per sample time across its exposure."""
+    cameras: list[Camera]
+    times: list[float]        # normalised clip times of the samples
+    image: torch.Tensor       # [H, W, C] sRGB-encoded, as stored
+
+
+def blur_views(dataset: SceneDataset, level: str, samples: int, mode: str, channels: int) -> list[BlurView]:
+    """Every training frame of blur level `level`. mode "mean": `samples` render times spread evenly from
+    the first to the last rendered frame of the exposure (how the dataset averaged it); "centre": one
+    render at the exposure centre."""
+    views = []
+    for rec in dataset.blurred_frames(level):
+        if mode == "mean" and rec.exposure_us is not None:
+            t_us = np.linspace(rec.exposure_us[0], rec.exposure_us[1], samples)
+        else:
+            t_us = np.array([rec.t_us])
+        cams = [dataset_camera(dataset, rec.camera, t) for t in t_us]
+        views.append(BlurView(cams, [float(t) / dataset.duration_us for t in t_us],
+                              torch.from_numpy(load_frame(dataset, rec, channels))))
+    return views

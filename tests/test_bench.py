@@ -91,13 +91,14 @@ def _tiny_bench(motion_scene) -> BenchConfig:
     cells = {
         "d3dgs_sharp": CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "sharp"}),
         "d3dgs_blur": CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "strong"}),
+        "deblur_d3dgs": CellSpec("deblur_d3dgs", overrides={**TINY_TRAIN, "frames": "strong", "blur_samples": 3}),
         "e2vid_d3dgs": CellSpec("e2vid_d3dgs", overrides=TINY_TRAIN),
         "e4dgs": CellSpec("e4dgs", overrides=TINY_TRAIN),
         "e4dgs_rgb": CellSpec("e4dgs_rgb", overrides={**TINY_TRAIN, "rgb_frames": "strong"}),
     }
     return build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name], "cells": cells,
                                       "blur": {"scene": motion_scene.name, "levels": ["mild", "strong"],
-                                               "cells": ["d3dgs_blur", "e4dgs"]},
+                                               "cells": ["d3dgs_blur", "deblur_d3dgs", "e4dgs"]},
                                       "ablation": {"scene": motion_scene.name, "switches": {"w/o AES": {"events.aes": False}}},
                                       "lpips_net": "alex"})
 
@@ -128,7 +129,7 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
     assert not set(resumed) & set(calls)                     # finished jobs are reused, not retrained
     keys = {r["key"] for r in rows}
     assert {f"main/{motion_scene.name}/{c}" for c in MAIN_CELLS} <= keys
-    assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES/seed0" in keys
+    assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"blur/{motion_scene.name}/deblur_d3dgs/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES/seed0" in keys
     assert not any(k.startswith("blur/") and "/e4dgs/" in k for k in keys)   # events-only: blur cannot matter
     for r in rows:
         assert r["iterations"] == 12 and np.isfinite([r["psnr"], r["ssim"], r["lpips"]]).all()
@@ -160,15 +161,15 @@ def test_report_from_stored_results(tmp_path):
     write_report(read_results(tmp_path / "results.jsonl"), tmp_path, "# title")
     md = (tmp_path / "leaderboard.md").read_text()
     line = next(l for l in md.splitlines() if l.startswith("| E-4DGS (events + blurred RGB)"))
-    assert "**24.00**" in line and "**26.00**" in line and "**25.00**" in line   # best PSNR: a, b, average
+    assert "**25.00**" in line and "**27.00**" in line and "**26.00**" in line   # best PSNR: a, b, average
     second = next(l for l in md.splitlines() if l.startswith("| E-4DGS (events) |"))
-    assert "<u>23.00</u>" in second and "<u>0.200</u>" in second
+    assert "<u>24.00</u>" in second and "<u>0.100</u>" in second
     board = json.loads((tmp_path / "leaderboard.json").read_text())
-    assert board["e4dgs_rgb"]["average"]["psnr"] == pytest.approx(25.0) and set(board["e4dgs"]["scenes"]) == {"a", "b"}
+    assert board["e4dgs_rgb"]["average"]["psnr"] == pytest.approx(26.0) and set(board["e4dgs"]["scenes"]) == {"a", "b"}
     csv_lines = (tmp_path / "leaderboard.csv").read_text().splitlines()
-    assert csv_lines[0].startswith("method,label,a_psnr") and len(csv_lines) == 6
+    assert csv_lines[0].startswith("method,label,a_psnr") and len(csv_lines) == 7
     blur = (tmp_path / "blur.md").read_text()
-    assert "19.00" in blur and "17.00" in blur and "23.00" in blur       # events-only row from the main run
+    assert "19.00" in blur and "17.00" in blur and "24.00" in blur       # events-only row from the main run
     ablation = (tmp_path / "ablation.md").read_text()
     full = next(l for l in ablation.splitlines() if l.startswith("| full |"))
     no_tv = next(l for l in ablation.splitlines() if l.startswith("| w/o TV |"))
@@ -206,7 +207,7 @@ def test_bench_report_cli_regenerates_without_training(tmp_path):
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     assert main(["bench", "--preset", "quick", "--out", str(tmp_path), "--report"]) == 0
     md = (tmp_path / "leaderboard.md").read_text()
-    assert "`quick` preset" in md and "2-core CPU" in md and "**24.00**" in md
+    assert "`quick` preset" in md and "2-core CPU" in md and "**25.00**" in md
     with pytest.raises(SystemExit, match="nosuch"):
         main(["bench", "--preset", "nosuch", "--report"])
     with pytest.raises(SystemExit, match="not in preset"):

@@ -11,7 +11,7 @@ import importlib
 METHODS: dict[str, type] = {}
 
 # modules that register methods when imported
-_MODULES = ("recon.methods.d3dgs", "recon.methods.e4dgs", "recon.methods.e2vid_d3dgs")
+_MODULES = ("recon.methods.d3dgs", "recon.methods.e4dgs", "recon.methods.e2vid_d3dgs", "recon.methods.deblur_d3dgs")
 
 
 def register(cls: type) -> type:

@@ -21,8 +21,6 @@ correction on log intensity (recon.color).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 from torch import nn
@@ -37,16 +35,9 @@ from recon.methods import register
 from recon.model import DynamicGaussians
 from recon.raster import Camera
 from recon.trainer import Method
-from recon.views import dataset_camera, load_frame
+from recon.views import BlurView, blur_views, dataset_camera
 
 PAPER_PIXELS = 346 * 260
-
-
-@dataclass
-class BlurView:
-    cameras: list[Camera]     # one per sample time across the exposure
-    times: list[float]        # normalised
-    image: torch.Tensor       # [H, W, 3] sRGB
 
 
 @register
@@ -113,17 +104,7 @@ class E4DGS(Method):
 
     # -- data -----------------------------------------------------------------------------------
     def _blur_views(self) -> list[BlurView]:
-        ds, cfg = self.dataset, self.cfg
-        views = []
-        for rec in ds.blurred_frames(cfg.rgb_frames):
-            if cfg.rgb_render == "mean" and rec.exposure_us is not None:
-                t_us = np.linspace(rec.exposure_us[0], rec.exposure_us[1], cfg.rgb_samples)
-            else:
-                t_us = np.array([rec.t_us])
-            cams = [dataset_camera(ds, rec.camera, t) for t in t_us]
-            views.append(BlurView(cams, [float(t) / ds.duration_us for t in t_us],
-                                  torch.from_numpy(load_frame(ds, rec, 3))))
-        return views
+        return blur_views(self.dataset, self.cfg.rgb_frames, self.cfg.rgb_samples, self.cfg.rgb_render, 3)
 
     def log_intensity(self, image: torch.Tensor) -> torch.Tensor:
         """Rendered sRGB image [H, W, C] -> L_hat [H, W] through the simulator's response."""
@@ -157,10 +138,7 @@ class E4DGS(Method):
     def rgb_loss(self, trainer):
         view = self.blur_views[trainer.next_index(len(self.blur_views))]
         outs = [trainer.model.render_output(c, t, trainer.tcfg.backend) for c, t in zip(view.cameras, view.times)]
-        if len(outs) == 1:
-            pred = outs[0].image
-        else:  # blur = mean of linear light over the exposure
-            pred = ev.linear_to_srgb_t(torch.stack([ev.srgb_to_linear_t(o.image) for o in outs]).mean(0))
+        pred = ev.exposure_mean([o.image for o in outs])
         loss = photometric_loss(pred, view.image, self.cfg.lambda_dssim)
         return loss, list(zip(outs, view.cameras))
 
