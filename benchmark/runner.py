@@ -74,12 +74,15 @@ def ensure_dataset(cfg: BenchConfig, data_root: Path, log: Callable[[str], None]
         raise RuntimeError(f"dataset generation failed for {', '.join(missing)} (run `e4dgs bench` again to resume)")
 
 
-def evaluate_model(method_obj, model, records, lpips_net: str | None) -> dict:
-    return score_pairs(method_obj.eval_pairs(model, records), lpips_net=lpips_net)
+def evaluate_model(method_obj, model, records, lpips_net: str | None, placement=None) -> dict:
+    """Scores of `model` on `records`, rendered on the run's (device, backend) (default: CPU, auto)."""
+    device, backend = placement or ("cpu", "auto")
+    return score_pairs(method_obj.eval_pairs(model.to(device), records, backend), lpips_net=lpips_net)
 
 
 def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool) -> dict:
     from recon.api import fit, resolve_config
+    from recon.device import run_placement
     from recon.methods import get_method
     from recon.model import load
 
@@ -92,9 +95,10 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     dataset = SceneDataset(scene_dir)
     method_cfg = resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides)
     scorer = get_method(job.method).for_evaluation(dataset, method_cfg)
+    placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
     records = dataset.frames("test")
     t1 = time.time()
-    final = evaluate_model(scorer, model, records, cfg.lpips_net)
+    final = evaluate_model(scorer, model, records, cfg.lpips_net, placement)
     log_rows = [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
     snapshots = []
     for row in log_rows:
@@ -104,7 +108,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
             scores = {k: final[k] for k in ("psnr", "ssim", "lpips") if k in final}
         else:
             snap = load(run_dir / row["snapshot"])
-            s = evaluate_model(scorer, snap, records, None)
+            s = evaluate_model(scorer, snap, records, None, placement)
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
@@ -114,6 +118,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         "run_dir": str(run_dir.relative_to(out_root)),
         **{k: final[k] for k in ("psnr", "ssim", "lpips")}, "n_test_images": final["n_images"],
         "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
+        "device": str(placement[0]), "backend": placement[1],
         "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),
         "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
         "versions": versions(), "git_commit": git_commit(), "lpips_net": cfg.lpips_net,

@@ -75,7 +75,7 @@ def run_render(args: argparse.Namespace) -> int:
     camera = int(args.camera) if args.camera.isdigit() else camera_from_json(Path(args.camera))
     for t in args.t:
         try:
-            img = model.render(camera, t).numpy()
+            img = model.render_numpy(camera, t)
         except ValueError as exc:
             raise SystemExit(f"error: {exc}") from None
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img

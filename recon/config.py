@@ -13,6 +13,7 @@ the tiny test scene: a 45-iteration warm-up gave log-scale offsets of -180 withi
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -129,7 +130,8 @@ class TrainConfig:
     init: InitConfig = field(default_factory=InitConfig)
     background: tuple[float, float, float] | None = None   # None: the scene's empty-background colour
     deform_bf16: bool = False         # run the deformation MLP under bfloat16 autocast (CPU: ~2.3x faster)
-    backend: str = "auto"
+    backend: str = "auto"             # auto: gsplat on CUDA, the numba cpu backend on the CPU (recon.raster)
+    device: str = "auto"              # auto: CUDA when torch sees it and gsplat is installed, else the CPU
     seed: int = 0
     checkpoint_every: int = 500       # real iterations between resumable checkpoints
     eval_every: int = 0               # real iterations between test-PSNR log rows (0: at snapshots only)
@@ -147,6 +149,10 @@ class TrainConfig:
                 raise ConfigError(f"snapshots: expected fractions in (0, 1], got {f!r}")
         if self.background is not None and not all(0 <= c <= 1 for c in self.background):
             raise ConfigError(f"background: expected values in [0, 1], got {self.background!r}")
+        if self.backend not in ("auto", "cpu", "gsplat", "torch", "dense"):
+            raise ConfigError(f"backend: expected auto, cpu, gsplat, torch or dense, got {self.backend!r}")
+        if not (self.device in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", self.device)):
+            raise ConfigError(f"device: expected auto, cpu, cuda or cuda:N, got {self.device!r}")
 
     def scaled(self, v: int) -> int:
         """An iteration count of the 40k reference schedule at this run's budget (>= 1)."""

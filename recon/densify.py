@@ -16,10 +16,10 @@ from recon.raster import RenderOutput
 class DensifyStats:
     """Per-Gaussian accumulators between densification steps."""
 
-    def __init__(self, n: int):
-        self.grad_accum = torch.zeros(n)     # [N] sum of NDC gradient norms over the views that saw it
-        self.count = torch.zeros(n)          # [N] number of such views
-        self.max_radii = torch.zeros(n)      # [N] largest screen radius (pixels) seen
+    def __init__(self, n: int, device: torch.device | str = "cpu"):
+        self.grad_accum = torch.zeros(n, device=device)     # [N] sum of NDC gradient norms over the views that saw it
+        self.count = torch.zeros(n, device=device)          # [N] number of such views
+        self.max_radii = torch.zeros(n, device=device)      # [N] largest screen radius (pixels) seen
 
     def __len__(self) -> int:
         return self.grad_accum.shape[0]
@@ -31,7 +31,7 @@ class DensifyStats:
         g = out.means2d.grad
         if g is None:
             return
-        g = g.detach() * torch.tensor([0.5 * width, 0.5 * height], dtype=g.dtype)
+        g = g.detach() * torch.tensor([0.5 * width, 0.5 * height], dtype=g.dtype, device=g.device)
         self.grad_accum[visible] += g[visible].norm(dim=-1).to(self.grad_accum.dtype)
         self.count[visible] += 1
 
@@ -40,13 +40,15 @@ class DensifyStats:
         self.grad_accum, self.count, self.max_radii = self.grad_accum[mask], self.count[mask], self.max_radii[mask]
 
     def reset(self, n: int) -> None:
-        self.__init__(n)
+        self.__init__(n, self.grad_accum.device)
 
     def state_dict(self) -> dict:
-        return {"grad_accum": self.grad_accum, "count": self.count, "max_radii": self.max_radii}
+        return {"grad_accum": self.grad_accum.cpu(), "count": self.count.cpu(), "max_radii": self.max_radii.cpu()}
 
     def load_state_dict(self, state: dict) -> None:
-        self.grad_accum, self.count, self.max_radii = (state[k].clone() for k in ("grad_accum", "count", "max_radii"))
+        device = self.grad_accum.device
+        self.grad_accum, self.count, self.max_radii = (state[k].to(device).clone()
+                                                       for k in ("grad_accum", "count", "max_radii"))
 
 
 def densify_and_prune(model: GaussianModel, stats: DensifyStats, cfg: DensifyConfig, extent: float,
@@ -73,23 +75,23 @@ def densify_and_prune(model: GaussianModel, stats: DensifyStats, cfg: DensifyCon
     n_clone, n_split = int(clone.sum()), int(split.sum())
     if n_clone + n_split > room:
         order = torch.argsort(grads, descending=True)
-        allowed = torch.zeros(n0, dtype=torch.bool)
+        allowed = torch.zeros(n0, dtype=torch.bool, device=model.means.device)
         allowed[order[:room]] = True
         clone &= allowed
         split &= allowed
         n_clone, n_split = int(clone.sum()), int(split.sum())
-    extra = torch.zeros(n0, dtype=torch.bool) if extra_prune is None else extra_prune.clone()
+    extra = torch.zeros(n0, dtype=torch.bool, device=model.means.device) if extra_prune is None else extra_prune.clone()
     big_screen = stats.max_radii > cfg.max_screen_size
     if n_clone:
         model.clone_selected(clone, optimizer)
-        split = torch.cat([split, torch.zeros(n_clone, dtype=torch.bool)])
+        split = torch.cat([split, torch.zeros(n_clone, dtype=torch.bool, device=model.means.device)])
         extra = torch.cat([extra, extra[clone]])
         big_screen = torch.cat([big_screen, big_screen[clone]])
     if n_split:
         keep = ~split
         model.split_selected(split, 2, optimizer, generator)
         extra = torch.cat([extra[keep], extra[split].repeat(2)])
-        big_screen = torch.cat([big_screen[keep], torch.zeros(2 * n_split, dtype=torch.bool)])
+        big_screen = torch.cat([big_screen[keep], torch.zeros(2 * n_split, dtype=torch.bool, device=model.means.device)])
     with torch.no_grad():
         prune = model.opacities < cfg.min_opacity
         if prune_large:

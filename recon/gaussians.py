@@ -119,7 +119,7 @@ class GaussianModel(nn.Module):
         """Append copies of the selected Gaussians (3DGS clone; new Adam moments are zero)."""
         n_new = int(mask.sum())
         self._edit(optimizer, lambda t: torch.cat([t, t[mask]]),
-                   lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype)]))
+                   lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype, device=s.device)]))
         if self.anchors is not None:
             self.anchors = torch.cat([self.anchors, self.anchors[mask]])
 
@@ -130,7 +130,11 @@ class GaussianModel(nn.Module):
         idx = torch.nonzero(mask).squeeze(1)
         with torch.no_grad():
             std = self.scales[idx].repeat(n, 1)
-            samples = torch.normal(torch.zeros_like(std), std, generator=generator)
+            # drawn where the generator lives (the trainer's is on the CPU, so a seed gives the same
+            # children on every device), then moved to the model's device
+            gen_device = generator.device if generator is not None else std.device
+            samples = torch.normal(torch.zeros_like(std, device=gen_device), std.to(gen_device),
+                                   generator=generator).to(std.device)
             R = quat_to_rotmat(self.quats[idx]).repeat(n, 1, 1)
             new_means = (R @ samples[..., None])[..., 0] + self.means[idx].repeat(n, 1)
             new_log_scales = torch.log(self.scales[idx].repeat(n, 1) / (0.8 * n))
@@ -144,10 +148,10 @@ class GaussianModel(nn.Module):
         for name in PARAM_NAMES:  # parameter-specific children, then drop the parents
             old = getattr(self, name)
             self._replace(optimizer, name, param(old.detach(), name),
-                           lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype)]))
+                           lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype, device=s.device)]))
         if self.anchors is not None:  # children read their parent's deformation input
             self.anchors = torch.cat([self.anchors, self.anchors[idx].repeat(n, 1)])
-        keep = torch.ones(len(self), dtype=torch.bool)
+        keep = torch.ones(len(self), dtype=torch.bool, device=self.means.device)
         keep[idx] = False
         self.prune(keep, optimizer)
 

@@ -57,7 +57,19 @@ class DynamicGaussians:
 
     @property
     def background(self) -> torch.Tensor:
-        return torch.tensor(self.meta.background, dtype=torch.float32)
+        return torch.tensor(self.meta.background, dtype=torch.float32, device=self.device)
+
+    @property
+    def device(self) -> torch.device:
+        return self.gaussians.means.device
+
+    def to(self, device: torch.device | str) -> "DynamicGaussians":
+        """Move the Gaussians and the deformation field to `device` (in place; returns self)."""
+        self.gaussians.to(device)
+        if self.gaussians.anchors is not None:
+            self.gaussians.anchors = self.gaussians.anchors.to(device)
+        self.deform.to(device)
+        return self
 
     def camera(self, index: int, t: float) -> Camera:
         """Dataset camera `index` at normalised time t, posed along its recorded trajectory."""
@@ -84,11 +96,15 @@ class DynamicGaussians:
         cam = self.camera(camera, t) if isinstance(camera, (int, np.integer)) else camera
         return self.render_output(cam, t, backend).image.clamp(0.0, 1.0)
 
+    def render_numpy(self, camera: Camera | int, t: float, backend: str = "auto") -> np.ndarray:
+        """`render` as a float32 array [H, W, C] on the CPU, whatever device the model is on."""
+        return self.render(camera, t, backend).cpu().numpy()
+
     # -- files ----------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
         return {"format": FORMAT, "meta": asdict(self.meta),
-                "gaussians": {k: v.detach().clone() for k, v in self.gaussians.state_dict().items()},
-                "deform": {k: v.detach().clone() for k, v in self.deform.state_dict().items()},
+                "gaussians": {k: v.detach().cpu().clone() for k, v in self.gaussians.state_dict().items()},
+                "deform": {k: v.detach().cpu().clone() for k, v in self.deform.state_dict().items()},
                 "cameras": [{"intrinsics": c.intrinsics.to_dict(), "times_us": c.times_us.tolist(),
                              "c2w_opencv": c.c2w.tolist()} for c in self.cameras]}
 

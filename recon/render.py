@@ -11,11 +11,11 @@ from recon.gaussians import GaussianModel
 from recon.raster import Camera, RenderOutput, render
 
 
-def camera_from_pose(K, c2w_opencv, width: int, height: int, dtype=torch.float32) -> Camera:
+def camera_from_pose(K, c2w_opencv, width: int, height: int, dtype=torch.float32, device="cpu") -> Camera:
     """Raster camera from intrinsics K [3,3] and an OpenCV camera-to-world pose [4,4]."""
     c2w = np.asarray(c2w_opencv, np.float64)
-    return Camera(torch.as_tensor(np.asarray(K, np.float64), dtype=dtype),
-                  torch.as_tensor(np.linalg.inv(c2w), dtype=dtype), int(width), int(height))
+    return Camera(torch.as_tensor(np.asarray(K, np.float64), dtype=dtype, device=device),
+                  torch.as_tensor(np.linalg.inv(c2w), dtype=dtype, device=device), int(width), int(height))
 
 
 def camera_center(camera: Camera) -> torch.Tensor:
@@ -56,6 +56,7 @@ def render_views(gaussians: GaussianModel, field: DeformationField | None, camer
     scales, opacities = torch.exp(log_scales), gaussians.opacities
     outs = []
     for camera in cameras:
-        colors = gaussians.colors(camera_center(camera).to(means.dtype), means)
+        camera = camera.to(means.dtype, means.device)
+        colors = gaussians.colors(camera_center(camera), means)
         outs.append(render(means, quats, scales, opacities, colors, camera, background, backend))
     return outs

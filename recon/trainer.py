@@ -32,6 +32,7 @@ from recon.config import TrainConfig
 from recon.deform import DeformationField
 from recon.event_init import carved_points
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
+from recon.device import run_placement
 from recon.evaluate import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
@@ -66,6 +67,10 @@ class Method:
     def setup_model(self, model: DynamicGaussians) -> None:
         """Adjust a freshly initialised model (e.g. give it deformation anchors)."""
 
+    def to_device(self, device: torch.device) -> None:
+        """Move the method's training data (targets, cameras) and parameters to the run's device
+        (called once, before the optimizer is built)."""
+
     def extra_parameters(self) -> list[dict]:
         """Additional Adam groups (dicts with params, lr, name)."""
         return []
@@ -82,12 +87,13 @@ class Method:
         """What is applied to a prediction before it is scored (identity; E-4DGS: colour correction)."""
         return pred
 
-    def eval_pairs(self, model: DynamicGaussians, records) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(prediction, ground truth) images [H, W, C] in [0, 1] for held-out records."""
+    def eval_pairs(self, model: DynamicGaussians, records, backend: str = "auto") -> list[tuple[np.ndarray, np.ndarray]]:
+        """(prediction, ground truth) images [H, W, C] in [0, 1] on the CPU for held-out records,
+        rendered on the model's device with `backend`."""
         pairs = []
         for rec in records:
             gt = load_frame(self.dataset, rec, self.channels())
-            pred = model.render(record_camera(self.dataset, rec), rec.time).numpy()
+            pred = model.render_numpy(record_camera(self.dataset, rec), rec.time, backend)
             pairs.append((self.correct(pred, gt), gt))
         return pairs
 
@@ -158,6 +164,9 @@ class Trainer:
         self.on_iteration = on_iteration
         self.fingerprint = fingerprint(method.name, self.cfg, self.dataset)
         self.extent = scene_extent(self.dataset)
+        self.device, self.backend = run_placement(self.tcfg.device, self.tcfg.backend)
+        self.method.to_device(self.device)
+        # the torch generator (split children) stays on the CPU: a seed draws the same on every device
         self.rng = np.random.default_rng(self.tcfg.seed)
         self.torch_gen = torch.Generator().manual_seed(self.tcfg.seed)
         self.log: list[dict] = []
@@ -182,13 +191,13 @@ class Trainer:
                          config=to_dict(self.cfg))
         model = DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
         self.method.setup_model(model)
-        return model
+        return model.to(self.device)
 
     def setup(self) -> None:
         """A fresh model, its optimizer and densification statistics (iteration 0)."""
         self.model = self._new_model()
         self.optimizer = self._optimizer()
-        self.stats = DensifyStats(len(self.model))
+        self.stats = DensifyStats(len(self.model), self.device)
 
     def _optimizer(self) -> torch.optim.Adam:
         g, lr = self.model.gaussians, self.tcfg.lr
@@ -256,11 +265,11 @@ class Trainer:
         state = torch.load(path, map_location="cpu", weights_only=True)
         if state.get("format") != CHECKPOINT_FORMAT or state.get("fingerprint") != self.fingerprint:
             raise TrainingError(f"{path}: checkpoint of a different run; delete it or use another output folder")
-        self.model = DynamicGaussians.from_state(state["model"], str(path))
+        self.model = DynamicGaussians.from_state(state["model"], str(path)).to(self.device)
         self.method.load_state_dict(state["method"])
         self.optimizer = self._optimizer()
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.stats = DensifyStats(len(self.model))
+        self.optimizer.load_state_dict(state["optimizer"])   # moves Adam's moments to the parameters' device
+        self.stats = DensifyStats(len(self.model), self.device)
         self.stats.load_state_dict(state["stats"])
         self.rng.bit_generator.state = json.loads(state["rng"])
         self.torch_gen.set_state(state["torch_rng"])
@@ -278,7 +287,7 @@ class Trainer:
         if self.tcfg.eval_max_views and len(records) > self.tcfg.eval_max_views:
             pick = np.linspace(0, len(records) - 1, self.tcfg.eval_max_views).round().astype(int)
             records = [records[i] for i in pick]
-        return evaluate_psnr(self.method.eval_pairs(self.model, records))
+        return evaluate_psnr(self.method.eval_pairs(self.model, records, self.backend))
 
     def _snapshot_iterations(self) -> set[int]:
         return {max(1, int(round(f * self.tcfg.iterations))) for f in self.tcfg.snapshots}

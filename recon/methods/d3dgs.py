@@ -13,6 +13,7 @@ import torch
 
 from datagen.dataset import DatasetError, FrameRecord, SceneDataset
 from recon.config import D3DGSConfig
+from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
 from recon.raster import Camera
@@ -41,6 +42,9 @@ class D3DGS(Method):
     def channels(self) -> int:
         return self.cfg.channels
 
+    def to_device(self, device: torch.device) -> None:
+        self.views = to_device(self.views, device)
+
     def training_records(self) -> list[FrameRecord]:
         if self.cfg.frames == "sharp":
             return self.dataset.frames("train")
@@ -55,7 +59,7 @@ class D3DGS(Method):
 
     def step(self, trainer, iteration: int):
         view = self.views[trainer.next_index(len(self.views))]
-        out = trainer.model.render_output(view.camera, view.time, trainer.tcfg.backend)
+        out = trainer.model.render_output(view.camera, view.time, trainer.backend)
         if out.means2d.requires_grad:
             out.means2d.retain_grad()
         loss = photometric_loss(out.image, view.image, self.cfg.lambda_dssim)

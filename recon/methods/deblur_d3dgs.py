@@ -18,6 +18,7 @@ import torch.nn.functional as F
 from datagen.dataset import DatasetError, SceneDataset
 from recon import events as ev
 from recon.config import DeblurD3DGSConfig
+from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
 from recon.trainer import Method
@@ -45,10 +46,13 @@ class DeblurD3DGS(Method):
     def channels(self) -> int:
         return 3
 
+    def to_device(self, device: torch.device) -> None:
+        self.views = to_device(self.views, device)
+
     def step(self, trainer, iteration: int):
         cfg = self.cfg
         view = self.views[trainer.next_index(len(self.views))]
-        outs = [trainer.model.render_output(c, t, trainer.tcfg.backend) for c, t in zip(view.cameras, view.times)]
+        outs = [trainer.model.render_output(c, t, trainer.backend) for c, t in zip(view.cameras, view.times)]
         loss = photometric_loss(ev.exposure_mean([o.image for o in outs]), view.image, cfg.lambda_dssim)
         if cfg.lambda_lowres > 0:   # the middle render sits at the exposure centre (blur_samples is odd)
             loss = loss + cfg.lambda_lowres * lowres_l1(outs[len(outs) // 2].image, view.image, cfg.lowres_factor)

@@ -30,6 +30,7 @@ from recon import events as ev
 from recon.color import correct_colors
 from recon.config import E4DGSConfig
 from recon.event_windows import EventSource, WindowSampler
+from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
 from recon.model import DynamicGaussians
@@ -63,8 +64,14 @@ class E4DGS(Method):
         if e.views_per_step > dataset.n_cameras:
             raise ValueError(f"events.views_per_step: {e.views_per_step} cameras asked for, the dataset "
                              f"{dataset.dir} has {dataset.n_cameras}")
+        self.device = torch.device("cpu")
         self.log_c = nn.Parameter(torch.tensor(math.log(e.c_init)), requires_grad=e.aes)
         self.blur_views = self._blur_views() if self.uses_rgb else []
+
+    def to_device(self, device: torch.device) -> None:
+        self.device = device
+        self.log_c = nn.Parameter(self.log_c.detach().to(device), requires_grad=self.log_c.requires_grad)
+        self.blur_views = to_device(self.blur_views, device)
 
     @staticmethod
     def window_counts(dataset: SceneDataset, e, n_events: list[int]) -> tuple[int, int]:
@@ -96,11 +103,11 @@ class E4DGS(Method):
         return [{"params": [self.log_c], "lr": self.cfg.events.c_lr, "name": "c_hat"}] if self.cfg.events.aes else []
 
     def state_dict(self) -> dict:
-        return {"log_c": self.log_c.detach().clone()}
+        return {"log_c": self.log_c.detach().cpu().clone()}
 
     def load_state_dict(self, state: dict) -> None:
         with torch.no_grad():
-            self.log_c.copy_(state["log_c"])
+            self.log_c.copy_(state["log_c"].to(self.log_c.device))
 
     # -- data -----------------------------------------------------------------------------------
     def _blur_views(self) -> list[BlurView]:
@@ -121,13 +128,14 @@ class E4DGS(Method):
         t_e = min(max(t_end_us / ds.duration_us, 0.0), 1.0)
         cams_s = [dataset_camera(ds, w.camera, t_start_us) for w in windows]
         cams_e = [dataset_camera(ds, w.camera, t_end_us) for w in windows]
-        outs_s = trainer.model.render_outputs(cams_s, t_s, trainer.tcfg.backend)
-        outs_e = trainer.model.render_outputs(cams_e, t_e, trainer.tcfg.backend)
+        outs_s = trainer.model.render_outputs(cams_s, t_s, trainer.backend)
+        outs_e = trainer.model.render_outputs(cams_e, t_e, trainer.backend)
         intr = ds.intrinsics
         loss = 0.0
         for window, out_s, out_e in zip(windows, outs_s, outs_e):
             de, hits = ev.event_maps(window.x, window.y, window.p, intr.width, intr.height, self.c_pos, self.c_neg)
-            n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0, trainer.rng))
+            n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0,
+                                                 trainer.rng)).to(self.device)
             n_pred = ev.predicted_counts(self.log_intensity(out_s.image), self.log_intensity(out_e.image), self.c_hat)
             loss = loss + e.lambda_recon * ev.multiscale_recon_loss(n_gt, n_pred, e.loss_scales, e.recon_eps)
             if e.lambda_tv > 0:
@@ -137,7 +145,7 @@ class E4DGS(Method):
 
     def rgb_loss(self, trainer):
         view = self.blur_views[trainer.next_index(len(self.blur_views))]
-        outs = [trainer.model.render_output(c, t, trainer.tcfg.backend) for c, t in zip(view.cameras, view.times)]
+        outs = [trainer.model.render_output(c, t, trainer.backend) for c, t in zip(view.cameras, view.times)]
         pred = ev.exposure_mean([o.image for o in outs])
         loss = photometric_loss(pred, view.image, self.cfg.lambda_dssim)
         return loss, list(zip(outs, view.cameras))
@@ -157,14 +165,15 @@ class E4DGS(Method):
         return loss, renders
 
     # -- intensity importance pruning -----------------------------------------------------------
-    def importance(self, model: DynamicGaussians) -> torch.Tensor:
+    def importance(self, model: DynamicGaussians, backend: str = "auto") -> torch.Tensor:
         """w_i = max over the training cameras x iip_times timestamps of the Gaussian's largest
-        alpha x transmittance on any pixel [N]."""
-        w = torch.zeros(len(model))
+        alpha x transmittance on any pixel [N] (on the model's device, rendered with `backend`)."""
+        w = torch.zeros(len(model), device=model.device)
         ds = self.dataset
         for k in range(ds.n_cameras):
             for t in np.linspace(0.0, 1.0, self.cfg.events.iip_times):
-                out = model.render_output(dataset_camera(self.dataset, k, int(round(t * ds.duration_us))), float(t))
+                out = model.render_output(dataset_camera(self.dataset, k, int(round(t * ds.duration_us))), float(t),
+                                          backend)
                 w = torch.maximum(w, out.max_weight.detach())
         return w
 
@@ -173,7 +182,7 @@ class E4DGS(Method):
         if not e.iip or iteration < trainer.tcfg.scaled(e.iip_start) or \
                 iteration % trainer.tcfg.scaled(e.iip_interval) != 0:
             return None
-        return self.importance(trainer.model) < e.iip_threshold
+        return self.importance(trainer.model, trainer.backend) < e.iip_threshold
 
     # -- evaluation -----------------------------------------------------------------------------
     def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:

@@ -2,9 +2,10 @@
 
     render(means, quats, scales, opacities, colors, camera, background, backend="auto") -> RenderOutput
 
-Backends: "torch" (readable tile-binned PyTorch reference, autograd), "dense" (every Gaussian
-against every pixel; a test oracle), "cpu" (compiled numba kernels with hand-written backward;
-the default without a GPU), "gsplat" (CUDA, when available). Conventions are in `types.py` and
+Backends: "torch" (readable tile-binned PyTorch reference, autograd, any device), "dense" (every
+Gaussian against every pixel; a test oracle), "cpu" (compiled numba kernels with hand-written
+backward; what "auto" picks for CPU tensors), "gsplat" (CUDA; what "auto" picks for CUDA tensors
+when gsplat is installed). The camera follows the Gaussians' device and dtype. Conventions are in `types.py` and
 `projection.py`: quaternions (w, x, y, z), linear scales, opacities in [0, 1], OpenCV cameras.
 """
 from __future__ import annotations
@@ -30,25 +31,40 @@ def _check(means, quats, scales, opacities, colors, background):
         raise ValueError(f"render: background must have shape ({colors.shape[1]},), got {tuple(background.shape)}")
 
 
-def default_backend() -> str:
-    if torch.cuda.is_available():
-        try:
-            import gsplat  # noqa: F401
+def gsplat_available() -> bool:
+    try:
+        import gsplat  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
-            return "gsplat"
-        except ImportError:
-            pass
-    return "cpu"
+
+def resolve_backend(backend: str, device: torch.device | str) -> str:
+    """The backend that renders tensors on `device`: "auto" is gsplat on CUDA (the torch reference
+    when gsplat is not installed) and the numba "cpu" backend on the CPU; a backend that cannot run
+    on the device is an error."""
+    device = torch.device(device)
+    if backend == "auto":
+        if device.type == "cuda":
+            return "gsplat" if gsplat_available() else "torch"
+        return "cpu"
+    if backend not in BACKENDS:
+        raise ValueError(f"render: backend must be one of {BACKENDS} or 'auto', got {backend!r}")
+    if backend == "cpu" and device.type != "cpu":
+        raise ValueError(f"render: backend 'cpu' (numba) renders CPU tensors, these are on {device}; "
+                         "use 'gsplat', 'torch' or 'auto'")
+    if backend == "gsplat" and device.type != "cuda":
+        raise ValueError(f"render: backend 'gsplat' renders CUDA tensors, these are on {device}; "
+                         "use 'cpu', 'torch' or 'auto'")
+    return backend
 
 
 def render(means, quats, scales, opacities, colors, camera: Camera, background, backend: str = "auto") -> RenderOutput:
     _check(means, quats, scales, opacities, colors, background)
     if camera.width < 1 or camera.height < 1:
         raise ValueError(f"render: image size must be positive, got {camera.width}x{camera.height}")
-    backend = default_backend() if backend == "auto" else backend
-    if backend not in BACKENDS:
-        raise ValueError(f"render: backend must be one of {BACKENDS} or 'auto', got {backend!r}")
-    camera = camera.to(means.dtype)
+    backend = resolve_backend(backend, means.device)
+    camera = camera.to(means.dtype, means.device)
     if backend == "gsplat":
         from recon.raster.gsplat_backend import render_gsplat
 

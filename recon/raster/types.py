@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import torch
 
@@ -22,8 +23,10 @@ class Camera:
     width: int
     height: int
 
-    def to(self, dtype: torch.dtype) -> "Camera":
-        return Camera(self.K.to(dtype), self.world_to_cam.to(dtype), self.width, self.height)
+    def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None) -> "Camera":
+        """The same camera with K and world_to_cam in `dtype` on `device` (None: unchanged)."""
+        return Camera(self.K.to(device=device, dtype=dtype), self.world_to_cam.to(device=device, dtype=dtype),
+                      self.width, self.height)
 
 
 @dataclass
@@ -33,4 +36,12 @@ class RenderOutput:
     depth: torch.Tensor        # [H, W] sum of weight * camera depth (divide by alpha for the mean depth)
     radii: torch.Tensor        # [N] int, 3-sigma screen radius in pixels, 0 when culled
     means2d: torch.Tensor      # [N, 2] projected centres (pixels); its .grad is what densification reads
-    max_weight: torch.Tensor   # [N] largest alpha * transmittance the Gaussian contributed to any pixel
+    # [N] largest alpha * transmittance the Gaussian contributed to any pixel, or a function computing
+    # it on first use (the gsplat backend, where it costs an extra pass)
+    max_weight_or_fn: torch.Tensor | Callable[[], torch.Tensor] | None
+
+    @property
+    def max_weight(self) -> torch.Tensor:
+        if callable(self.max_weight_or_fn):
+            self.max_weight_or_fn = self.max_weight_or_fn()
+        return self.max_weight_or_fn
