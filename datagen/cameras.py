@@ -239,7 +239,17 @@ class CameraTrajectory:
 def load_cameras(path: str | Path) -> list[CameraTrajectory]:
     """Read a dataset's cameras.json."""
     path = Path(path)
-    data = json.loads(path.read_text())
-    intr = Intrinsics(**data["intrinsics"])
-    return [CameraTrajectory(intr, np.asarray(cam["timestamps_us"], np.int64), np.asarray(cam["c2w_opencv"], np.float64))
-            for cam in data["cameras"]]
+    try:
+        data = json.loads(path.read_text())
+        intr = Intrinsics(**data["intrinsics"])
+        cams = [CameraTrajectory(intr, np.asarray(cam["timestamps_us"], np.int64),
+                                 np.asarray(cam["c2w_opencv"], np.float64)) for cam in data["cameras"]]
+    except FileNotFoundError:
+        raise ValueError(f"{path}: missing") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a cameras file of this toolkit ({type(exc).__name__}: {exc})") from None
+    for k, cam in enumerate(cams):
+        if cam.c2w.shape != (len(cam.times_us), 4, 4):
+            raise ValueError(f"{path}: cameras[{k}].c2w_opencv: expected one 4x4 pose per timestamp, got shape "
+                             f"{cam.c2w.shape} for {len(cam.times_us)} timestamps")
+    return cams

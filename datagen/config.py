@@ -222,8 +222,13 @@ def load_preset(preset: str | Path) -> PresetConfig:
         preset_cfg = from_dict(PresetConfig, _read_yaml(path))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
-    for name in preset_cfg.scenes:
-        scene_yaml_path(name)
+    for name in preset_cfg.scenes:   # every scene must build with the preset's overrides: blame the right file
+        try:
+            resolve_scene(name, preset_cfg.overrides)
+        except ConfigError as exc:
+            resolve_scene(name)           # the scene's own YAML is wrong: that error, naming it
+            detail = str(exc).split(": ", 1)[1] if ": " in str(exc) else str(exc)
+            raise ConfigError(f"{path}: overrides (applied to scene {name!r}): {detail}") from None
     return preset_cfg
 
 

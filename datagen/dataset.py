@@ -31,13 +31,25 @@ class FrameRecord:
     exposure_us: tuple[int, int] | None = None   # first and last rendered frame of a blurred frame
 
 
+def read_json(path: Path):
+    """A dataset's JSON file; a missing or malformed one is a DatasetError naming it."""
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: missing (the scene is incomplete; `e4dgs check` lists what differs)") from None
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"{path}: not valid JSON ({exc}); the file is damaged (`e4dgs check` verifies the scene)") from None
+
+
 class SceneDataset:
     def __init__(self, scene_dir: str | Path):
         self.dir = Path(scene_dir)
+        if not self.dir.is_dir():
+            raise DatasetError(f"{self.dir}: no such scene folder (expected a generated scene, e.g. data/quick/lego)")
         if not (self.dir / "manifest.json").exists():
             raise DatasetError(f"{self.dir}: no manifest.json: not a generated scene, or its generation has not "
                                "finished (run `e4dgs dataset` again to resume it)")
-        self.manifest = json.loads((self.dir / "manifest.json").read_text())
+        self.manifest = read_json(self.dir / "manifest.json")
         self.config: SceneConfig = resolve_scene(self.manifest["scene"], scene_file=self.dir / "scene.yaml")
         self.cameras: list[CameraTrajectory] = load_cameras(self.dir / "cameras.json")
         self.intrinsics = self.cameras[0].intrinsics
@@ -51,7 +63,7 @@ class SceneDataset:
         if not path.exists():
             raise DatasetError(f"{path}: missing")
         frames = []
-        for f in json.loads(path.read_text())["frames"]:
+        for f in read_json(path)["frames"]:
             gray = self.dir / (f["gray_path"] + ".png") if "gray_path" in f else None
             exposure = blur.get((f["camera"], f["index"])) if blur else None
             frames.append(FrameRecord(f["camera"], f["index"], int(f["timestamp_us"]), float(f["time"]),
@@ -72,7 +84,7 @@ class SceneDataset:
         """Training frames of a blur level; their t_us / time is the exposure centre."""
         if level not in self.config.blur.target_px:
             raise DatasetError(f"{self.dir}: no blur level {level!r} (have: {', '.join(self.blur_levels()) or 'none'})")
-        exposures = json.loads((self.dir / "blur" / level / "exposures.json").read_text())
+        exposures = read_json(self.dir / "blur" / level / "exposures.json")
         spans = {(e["camera"], e["index"]): (e["first_frame_us"], e["last_frame_us"]) for e in exposures}
         return self._read_transforms(self.dir / "blur" / level / "transforms_train.json", spans)
 

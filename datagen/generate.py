@@ -32,10 +32,12 @@ from datagen.config import SceneConfig, load_preset, resolve_scene
 from datagen.preview import blur_psnr, contact_sheet
 from e4dgs.checkpoint import JobCheckpoint
 from e4dgs.config import ConfigError, dump_config
-from e4dgs.fileio import write_text_atomic
+from e4dgs.argtypes import positive_int
+from e4dgs.fileio import output_lock, sha256_file, write_text_atomic
 from e4dgs.imageio import write_exr, write_png_srgb
 from simulator.h5io import read_info, simulator_attrs
 from simulator.pixel import rec709_luma
+from simulator.events import EVENT_DTYPE
 from simulator.resumable import EventSpool
 from simulator.simulator import EventSimulator
 
@@ -48,14 +50,6 @@ def config_fingerprint(cfg: SceneConfig) -> str:
 
 def timestamps_us(cfg: SceneConfig) -> np.ndarray:
     return np.round(np.arange(cfg.n_timestamps) * 1e6 / cfg.render.fps).astype(np.int64)
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _git_commit() -> str | None:
@@ -81,7 +75,9 @@ class SceneJob:
                  progress: bool = True, position: int = 0):
         self.cfg, self.preset, self.progress, self.position = cfg, preset, progress, position
         self.dir = Path(out_root) / cfg.name
-        self.checkpoint_every = max(1, int(checkpoint_every))
+        if int(checkpoint_every) < 1:
+            raise ValueError(f"checkpoint_every: expected an integer >= 1, got {checkpoint_every!r}")
+        self.checkpoint_every = int(checkpoint_every)
         self.t_us = timestamps_us(cfg)
         self.tau = self.t_us / self.t_us[-1] if self.t_us[-1] > 0 else np.zeros(len(self.t_us))
         self.intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
@@ -123,6 +119,13 @@ class SceneJob:
         C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
         ckpt = JobCheckpoint(self.dir / ".generate.ckpt.npz", self.fingerprint)
         state = ckpt.load() or {}
+        spool_names = [self.dir / "events" / f".cam{k}.h5.spool" for k in range(C)]
+        if state and any(not p.exists() or p.stat().st_size < int(state[f"n_events_{k}"]) * EVENT_DTYPE.itemsize
+                         for k, p in enumerate(spool_names)):
+            print(f"warning: {ckpt.path}: its event spools are missing or shorter than it records; starting "
+                  f"{cfg.name} over from the first timestamp", flush=True)
+            ckpt.remove()
+            state = {}
         sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.seed * 1000 + k) for k in range(C)]
         attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
         spools = []
@@ -246,7 +249,7 @@ class SceneJob:
             "events_per_second_per_camera": [round(n / cfg.duration_s) for n in n_events],
             "blur": blur,
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
-            "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": _sha256(p)} for p in files},
+            "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": sha256_file(p)} for p in files},
         }
         write_text_atomic(d / "manifest.json", json.dumps(manifest, indent=1))
 
@@ -290,17 +293,22 @@ def main(argv=None) -> int:
     ap.add_argument("--preset", default="quick", help="dataset preset (configs/dataset_<preset>.yaml) or a YAML path")
     ap.add_argument("--scene-config", type=Path, help="use this scene YAML instead of the scene's own")
     ap.add_argument("--out", type=Path, required=True, help="dataset root; the scene goes to OUT/<scene>")
-    ap.add_argument("--checkpoint-every", type=int, default=100, metavar="N", help="timestamps between checkpoints")
+    ap.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--position", type=int, default=0, help="progress-bar line (when several scenes run side by side)")
     args = ap.parse_args(argv)
     try:
         preset = load_preset(args.preset)
         cfg = resolve_scene(args.scene, preset.overrides, args.scene_config)
-        SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position).run()
+        job = SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position)
+        with output_lock(job.dir):       # two generators of one scene folder would corrupt each other
+            job.run()
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except (ValueError, OSError) as exc:
+        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -5,6 +5,8 @@ import argparse
 import json
 from pathlib import Path
 
+from e4dgs.argtypes import nonnegative_int, positive_float, positive_int
+
 
 def add_train_e2vid_parser(sub) -> None:
     p = sub.add_parser("train-e2vid", help="train E2VID / FireNet on simulated event sequences",
@@ -16,7 +18,7 @@ def add_train_e2vid_parser(sub) -> None:
                    help="override a config value (e.g. iterations=200); repeatable")
     p.add_argument("--out", type=Path, default=Path("runs/e2vid"), help="training folder (default runs/e2vid)")
     p.add_argument("--export", type=Path, default=None, help="also write the weights (official layout) here")
-    p.add_argument("--val-sequences", type=int, default=8, help="held-out simulated sequences for the report")
+    p.add_argument("--val-sequences", type=positive_int, default=8, help="held-out simulated sequences for the report")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run_train_e2vid)
 
@@ -60,8 +62,8 @@ def add_e2vid_parser(sub) -> None:
     p.add_argument("--events", type=Path, required=True, help="event file, e.g. data/quick/lego/events/cam0.h5")
     p.add_argument("--out", type=Path, required=True, help="output folder for frames")
     p.add_argument("--weights", type=Path, default=None, help="network file (default: the shipped weights)")
-    p.add_argument("--dt-ms", type=float, default=None, help="one frame every DT ms (default: 30 frames over the stream)")
-    p.add_argument("--events-per-window", type=int, default=0, help="split windows holding more events (0: never)")
+    p.add_argument("--dt-ms", type=positive_float, default=None, help="one frame every DT ms (default: 30 frames over the stream)")
+    p.add_argument("--events-per-window", type=nonnegative_int, default=0, help="split windows holding more events (0: never)")
     p.set_defaults(func=run_e2vid)
 
 
@@ -87,7 +89,7 @@ def run_e2vid(args: argparse.Namespace) -> int:
     step = args.dt_ms * 1000 if args.dt_ms else max((t1 - t0) / 30, 1)
     times = np.arange(t0 + step, t1 + step, step).astype(np.int64)
     frames = reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height, times,
-                                args.events_per_window or None, net.cfg.num_bins)
+                                args.events_per_window or None, net.cfg.num_bins, progress=True)
     args.out.mkdir(parents=True, exist_ok=True)
     for k, f in enumerate(frames):
         write_png(args.out / f"{k:05d}.png", np.round(f * 255).astype(np.uint8))

@@ -39,10 +39,14 @@ def split_windows(t_us: np.ndarray, t_out_us: np.ndarray, events_per_window: int
 
 def reconstruct_frames(recon: Reconstructor, events: np.ndarray, width: int, height: int,
                        t_out_us: np.ndarray, events_per_window: int | None = None,
-                       num_bins: int = 5) -> np.ndarray:
-    """Frames [K, H, W] in [0, 1] at t_out_us from EVENT_DTYPE events (time-sorted)."""
+                       num_bins: int = 5, progress: bool = False) -> np.ndarray:
+    """Frames [K, H, W] in [0, 1] at t_out_us from EVENT_DTYPE events (time-sorted); `progress`
+    shows a bar over the network's windows."""
+    from tqdm import tqdm
+
     frames = np.zeros((len(t_out_us), height, width), np.float32)
-    for i0, i1, k in split_windows(events["t"], t_out_us, events_per_window):
+    windows = list(split_windows(events["t"], t_out_us, events_per_window))
+    for i0, i1, k in tqdm(windows, desc="e2vid", unit="window", disable=not progress):
         vox = normalize_voxel(torch.from_numpy(voxel_grid_events(events[i0:i1], num_bins, width, height)))
         img = recon(vox)
         if k >= 0:

@@ -1,22 +1,34 @@
-"""The `e4dgs` command: one entry point, one subcommand per tool."""
+"""The `e4dgs` command: one entry point, one subcommand per tool.
+
+Failures the user can act on (bad input files or values, file-system errors such as a full disk or
+a read-only folder, a locked output) print one line naming the file or field and exit 1; anything
+else prints a one-line internal error. `--debug` (anywhere on the line, or E4DGS_DEBUG=1) shows
+the traceback instead.
+"""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import warnings
+
+from e4dgs.config import ConfigWarning
 
 
 def build_parser() -> argparse.ArgumentParser:
     from benchmark.cli import add_bench_parser
-    from datagen.cli import add_dataset_parser
+    from datagen.cli import add_check_parser, add_dataset_parser
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
     from simulator.cli import add_simulate_parser, add_view_parser
 
     parser = argparse.ArgumentParser(prog="e4dgs", description="Event-camera 4D reconstruction toolkit")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of failures")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_simulate_parser(sub)
     add_view_parser(sub)
     add_dataset_parser(sub)
+    add_check_parser(sub)
     add_train_parser(sub)
     add_render_parser(sub)
     add_train_e2vid_parser(sub)
@@ -25,9 +37,39 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def describe_failure(exc: BaseException) -> str:
+    """One line for a failure: file-system errors as 'FILE: reason', input errors as their message."""
+    import yaml
+
+    if isinstance(exc, OSError) and exc.strerror and exc.filename is not None:
+        return f"{exc.filename}: {exc.strerror}"
+    if isinstance(exc, yaml.YAMLError):
+        return f"invalid YAML: {' '.join(str(exc).split())}"
+    if isinstance(exc, (ValueError, OSError, RuntimeError, KeyError)):
+        return " ".join(str(exc).split()) or type(exc).__name__
+    return f"internal error ({type(exc).__name__}: {exc}); run again with --debug for the traceback"
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("E4DGS_DEBUG") == "1"
+    argv = [a for a in argv if a != "--debug"]
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    try:
+        with warnings.catch_warnings():   # warnings as one line each; the toolkit's own every time
+            warnings.filterwarnings("always", category=ConfigWarning)
+            warnings.showwarning = lambda message, *_a, **_k: print(f"warning: {message}", file=sys.stderr)
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print(f"e4dgs {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except SystemExit:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the one place that turns failures into one line
+        if debug:
+            raise
+        print(f"e4dgs {args.command}: error: {describe_failure(exc)}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -22,6 +22,10 @@ T = TypeVar("T")
 _YAML11_EXPONENT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+")
 
 
+class ConfigWarning(UserWarning):
+    """A config value that is allowed but far outside the usual range (the message says why it matters)."""
+
+
 class ConfigError(ValueError):
     """A configuration value is missing, unknown, of the wrong type or out of range."""
 
@@ -214,7 +218,11 @@ def parse_set(items: list[str]) -> dict[str, Any]:
         if "=" not in item:
             raise ConfigError(f"--set {item!r}: expected key=value")
         key, value = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(value)
+        try:
+            out[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--set {key.strip()}: the value {value!r} is not valid YAML "
+                              f"({' '.join(str(exc).split())})") from None
     return out
 
 
@@ -230,6 +238,8 @@ def build_config(cls: type[T], config: Any = None, overrides: Mapping[str, Any] 
             data = yaml.safe_load(Path(config).read_text()) or {}
         except OSError as exc:
             raise ConfigError(f"{config}: cannot read config file ({exc.strerror})") from None
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{config}: not valid YAML: {' '.join(str(exc).split())}") from None
         if not isinstance(data, dict):
             raise ConfigError(f"{config}: expected a mapping at the top level")
     elif isinstance(config, Mapping):

@@ -1,8 +1,13 @@
-"""Output files that appear only when complete: write to a temporary name, then rename."""
+"""Output files that appear only when complete (write to a temporary name, then rename), locks that
+keep two runs from writing one output, and the removal of temporaries a killed run left behind."""
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
+import hashlib
 import os
+import re
 from pathlib import Path
 from typing import Iterator
 
@@ -13,14 +18,85 @@ def temp_path_for(path: str | os.PathLike) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.tmp")
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
+    """Delete temporaries of `path` (`.<name>.<pid>.tmp`) whose writing process no longer runs (a
+    run killed while writing); returns what was removed."""
+    path = Path(path)
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(\d+)\.tmp$")
+    removed = []
+    if not path.parent.is_dir():
+        return removed
+    for p in path.parent.iterdir():
+        m = pattern.match(p.name)
+        if m and int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1))):
+            p.unlink(missing_ok=True)
+            removed.append(p)
+    return removed
+
+
+class OutputLockedError(OSError):
+    """Another process holds the lock of this output."""
+
+
+@contextlib.contextmanager
+def output_lock(path: str | os.PathLike) -> Iterator[Path]:
+    """Hold an exclusive lock on output `path` (a `.<name>.lock` file beside it) for the `with` block.
+    A second process asking for it gets OutputLockedError at once, naming the holder's pid. The lock
+    dies with its process, so a killed run never leaves the output locked; the file is removed on exit."""
+    path = Path(path)
+    created = [d for d in [path.parent, *path.parent.parents] if not d.exists()]   # removed again if left empty
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lock = path.with_name(f".{path.name}.lock")
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise
+            raise OutputLockedError(f"{path}: another run (pid {holder}) is writing this output; wait for it to "
+                                    "finish or choose another output") from None
+        try:   # the holder before us may have removed the file after we opened it: lock the one on disk
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield lock
+    finally:
+        lock.unlink(missing_ok=True)
+        os.close(fd)
+        for d in created:
+            with contextlib.suppress(OSError):
+                d.rmdir()
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path to write; on success rename it to `path`, on failure delete it.
 
-    Nothing appears at `path` unless the `with` block finished without an exception.
+    Nothing appears at `path` unless the `with` block finished without an exception; temporaries
+    of `path` left by killed runs are removed first.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(path)
     tmp = temp_path_for(path)
     try:
         yield tmp
@@ -33,3 +109,12 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     with atomic_output(path) as tmp:
         tmp.write_text(text)
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -54,14 +54,34 @@ def add_render_parser(sub) -> None:
 
 
 def camera_from_json(path: Path):
+    """A raster camera from a JSON file {K: 3x3, c2w_opencv: 4x4, width, height}; errors name the file and field."""
     from recon.render import camera_from_pose
 
     try:
         data = json.loads(path.read_text())
-        return camera_from_pose(np.asarray(data["K"], np.float64), np.asarray(data["c2w_opencv"], np.float64),
-                                int(data["width"]), int(data["height"]))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise SystemExit(f"error: {path}: expected a JSON camera {{K, c2w_opencv, width, height}} ({exc})") from None
+    except OSError as exc:
+        raise SystemExit(f"error: --camera {path}: {exc.strerror}") from None
+    except ValueError as exc:
+        raise SystemExit(f"error: --camera {path}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise SystemExit(f"error: --camera {path}: expected a JSON object {{K, c2w_opencv, width, height}}")
+    fields = {}
+    for key, shape in (("K", (3, 3)), ("c2w_opencv", (4, 4))):
+        try:
+            fields[key] = np.asarray(data[key], np.float64)
+        except KeyError:
+            raise SystemExit(f"error: --camera {path}: missing field {key!r}") from None
+        except (ValueError, TypeError):
+            raise SystemExit(f"error: --camera {path}: {key}: expected a {shape[0]}x{shape[1]} array of numbers") from None
+        if fields[key].shape != shape or not np.all(np.isfinite(fields[key])):
+            raise SystemExit(f"error: --camera {path}: {key}: expected a finite {shape[0]}x{shape[1]} matrix, "
+                             f"got shape {fields[key].shape}")
+    for key in ("width", "height"):
+        if not isinstance(data.get(key), int) or data[key] < 1:
+            raise SystemExit(f"error: --camera {path}: {key}: expected a positive integer, got {data.get(key)!r}")
+    if abs(np.linalg.det(fields["c2w_opencv"][:3, :3])) < 1e-9:
+        raise SystemExit(f"error: --camera {path}: c2w_opencv: its rotation part is singular")
+    return camera_from_pose(fields["K"], fields["c2w_opencv"], data["width"], data["height"])
 
 
 def run_render(args: argparse.Namespace) -> int:

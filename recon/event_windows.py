@@ -14,7 +14,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from simulator.h5io import EventFileError, read_info, window_indices
+from simulator.h5io import EventFileError, read_info, validate_event_file, window_indices
 
 _TIE_PAD = 1024   # extra rows read past the window to include events sharing its end time
 
@@ -37,6 +37,7 @@ class EventSource:
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
+        validate_event_file(self.path)
         self.info = read_info(self.path)
         self.n = int(self.info["n_events"])
         self.width, self.height = int(self.info["width"]), int(self.info["height"])

@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from datagen.dataset import SceneDataset
 from e4dgs.config import dump_config, to_dict
-from e4dgs.fileio import atomic_output, write_text_atomic
+from e4dgs.fileio import atomic_output, output_lock, write_text_atomic
 from recon import init as initial
 from recon.config import TrainConfig
 from recon.deform import DeformationField
@@ -36,6 +36,7 @@ from recon.device import run_placement
 from recon.evaluate import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
+from recon.raster import warm_up
 from recon.views import gray_from_srgb, load_frame, record_camera
 from simulator.pixel import linear_to_srgb, rec709_luma
 
@@ -294,12 +295,24 @@ class Trainer:
 
     # -- the loop ---------------------------------------------------------------------------------
     def run(self) -> DynamicGaussians:
+        """Train to the budget (resuming a checkpoint), holding a lock on the output folder so two
+        runs into one folder cannot interleave their checkpoints."""
+        with output_lock(self.out):
+            return self._run()
+
+    def _run(self) -> DynamicGaussians:
         final = self.out / "model.pt"
         self._check_out_dir()
         if final.exists():
             return load(final)
-        if not self._load_checkpoint():
+        resumed = self._load_checkpoint()
+        if not resumed:
             self.setup()
+        elif self.progress:
+            tqdm.write(f"{self.method.name}: resuming {self.out} at iteration {self.iteration} of "
+                       f"{self.tcfg.iterations} ({self.wall_s:.0f} s trained so far)")
+        # kernel compilation (numba's first call, gsplat's CUDA build) is not training time
+        warm_up(self.backend, self.device, self.method.channels())
         cfg, sched = self.tcfg, self.sched
         snaps = self._snapshot_iterations()
         bar = tqdm(total=cfg.iterations, initial=self.iteration, disable=not self.progress,

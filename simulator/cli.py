@@ -4,7 +4,10 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import re
 from pathlib import Path
+
+from e4dgs.argtypes import positive_float, positive_int
 
 IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 
@@ -16,6 +19,23 @@ def list_frames(folder: Path) -> list[Path]:
     if len(files) < 2:
         raise SystemExit(f"error: --frames {folder}: need at least two images ({', '.join(sorted(IMAGE_SUFFIXES))}), found {len(files)}")
     return files
+
+
+def check_no_gaps(files: list[Path]) -> None:
+    """With --fps, frame k is timed k / fps: a missing number in a numbered sequence would shift every
+    later frame by one period, so it is an error (names without numbers are taken in order)."""
+    numbers = [re.search(r"(\d+)$", f.stem) for f in files]
+    if not all(numbers):
+        return
+    values = [int(m.group(1)) for m in numbers]
+    for a, b, fa, fb in zip(values, values[1:], files, files[1:]):
+        if b <= a:
+            raise SystemExit(f"error: --frames {fa.parent}: sorted by name, {fa.name} comes before {fb.name} but "
+                             "has a higher number; zero-pad the frame numbers")
+    for a, b, fa, fb in zip(values, values[1:], files, files[1:]):
+        if b != a + 1:
+            raise SystemExit(f"error: --frames {fa.parent}: the numbering has a gap ({fa.name} is followed by "
+                             f"{fb.name}); with --fps every frame must be present (or give --timestamps)")
 
 
 def read_timestamps(path: Path, n_frames: int) -> list[int]:
@@ -44,13 +64,13 @@ def add_simulate_parser(sub) -> None:
     p.add_argument("--frames", type=Path, required=True,
                    help="folder of frames sorted by name: EXR (linear) or PNG (sRGB, linearised)")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--fps", type=float, help="frame rate; frame k is at t0 + round(k * 1e6 / fps) us")
+    src.add_argument("--fps", type=positive_float, help="frame rate; frame k is at t0 + round(k * 1e6 / fps) us")
     src.add_argument("--timestamps", type=Path, help="file with one microsecond timestamp per frame")
     p.add_argument("--t0", type=int, default=0, help="time of the first frame with --fps, in us (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
     p.add_argument("--config", type=Path, help="simulator config YAML (default: noise-free, C = 0.2)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--checkpoint-every", type=int, default=500, metavar="N",
+    p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
                    help="save a resumable checkpoint every N frames (default 500)")
     p.set_defaults(func=run_simulate)
 
@@ -66,15 +86,11 @@ def job_fingerprint(config_yaml: str, seed: int, files: list[Path], t_us: list[i
 
 
 def run_simulate(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from e4dgs.config import ConfigError, dump_config, load_config
     from e4dgs.imageio import ImageReadError, read_linear_image
     from simulator.config import SimulatorConfig
-    from e4dgs.checkpoint import JobCheckpoint
+    from e4dgs.fileio import output_lock
     from simulator.h5io import simulator_attrs
-    from simulator.resumable import EventSpool
-    from simulator.simulator import EventSimulator, FrameError
 
     try:
         config = load_config(SimulatorConfig, args.config) if args.config else SimulatorConfig()
@@ -84,31 +100,51 @@ def run_simulate(args: argparse.Namespace) -> int:
     if args.timestamps:
         t_us = read_timestamps(args.timestamps, len(files))
     else:
-        if not args.fps > 0:
-            raise SystemExit(f"error: --fps must be positive, got {args.fps}")
+        check_no_gaps(files)
         t_us = [args.t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
-    if args.checkpoint_every < 1:
-        raise SystemExit("error: --checkpoint-every must be at least 1")
     try:
         first = read_linear_image(files[0])
     except ImageReadError as exc:
         raise SystemExit(f"error: {exc}") from None
-    height, width = first.shape[:2]
     config_yaml = dump_config(config)
     attrs = simulator_attrs(config)
     attrs.update(seed=args.seed, source_frames=str(args.frames),
                  n_frames=len(files))
-    ckpt = JobCheckpoint(args.out.with_name(f".{args.out.name}.ckpt.npz"),
-                         job_fingerprint(config_yaml, args.seed, files, t_us))
+    with output_lock(args.out):
+        _simulate_locked(args, config, files, t_us, first, attrs, job_fingerprint(config_yaml, args.seed, files, t_us))
+    return 0
+
+
+def _simulate_locked(args, config, files, t_us, first, attrs, fingerprint: str) -> None:
+    """The simulation loop, run while holding the output's lock: resume from a valid checkpoint (or
+    start over, saying why, when its spool cannot be resumed), write, and on failure leave only what
+    a later run resumes from (a spool with no checkpoint is removed)."""
+    from tqdm import tqdm
+
+    from e4dgs.checkpoint import JobCheckpoint
+    from e4dgs.imageio import ImageReadError, read_linear_image
+    from simulator.resumable import EventSpool, SpoolResumeError
+    from simulator.simulator import EventSimulator, FrameError
+
+    height, width = first.shape[:2]
+    ckpt = JobCheckpoint(args.out.with_name(f".{args.out.name}.ckpt.npz"), fingerprint)
     state = ckpt.load()
-    spool = EventSpool(args.out, width, height, t_offset_us=t_us[0], attrs=attrs,
-                       resume_count=None if state is None else int(state["n_events"]))
+    try:
+        spool = EventSpool(args.out, width, height, t_offset_us=t_us[0], attrs=attrs,
+                           resume_count=None if state is None else int(state["n_events"]))
+    except SpoolResumeError as exc:
+        print(f"warning: {exc}; starting {args.out} over from the first frame")
+        ckpt.remove()
+        state = None
+        spool = EventSpool(args.out, width, height, t_offset_us=t_us[0], attrs=attrs)
     sim = EventSimulator(config, width, height, seed=args.seed)
     start = 0
     if state is not None:
         sim.load_state_dict(state)
         start = int(state["next_frame"])
         print(f"resuming {args.out} at frame {start} of {len(files)} ({spool.n_events} events kept)")
+    checkpointed = state is not None
+    done = False
     try:
         for k in tqdm(range(start, len(files)), desc="simulate", unit="frame", initial=start, total=len(files)):
             try:
@@ -118,12 +154,15 @@ def run_simulate(args: argparse.Namespace) -> int:
                 raise SystemExit(f"error: {files[k]}: {exc}") from None
             if (k + 1) % args.checkpoint_every == 0 and k + 1 < len(files):
                 ckpt.save({**sim.state_dict(), "next_frame": k + 1, "n_events": spool.sync()})
+                checkpointed = True
         spool.finish(t_end_us=t_us[-1])
         ckpt.remove()
+        done = True
     finally:
         spool.close()
+        if not done and not checkpointed:   # nothing a later run could resume from
+            spool.spool_path.unlink(missing_ok=True)
     print(f"{args.out}: {spool.n_events} events from {len(files)} frames ({width}x{height})")
-    return 0
 
 
 def add_view_parser(sub) -> None:
@@ -134,16 +173,17 @@ def add_view_parser(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help=".png for one frame, .mp4 for a video")
     p.add_argument("--window", default="10ms", help="video: events shown per frame (default 10ms)")
     p.add_argument("--step", default=None, help="video: time between frames (default: the window)")
-    p.add_argument("--fps", type=float, default=30.0, help="video frame rate (default 30)")
+    p.add_argument("--fps", type=positive_float, default=30.0, help="video frame rate (default 30)")
     p.set_defaults(func=run_view)
 
 
 def run_view(args: argparse.Namespace) -> int:
-    from simulator.h5io import EventFileError, read_info, read_window
+    from simulator.h5io import EventFileError, read_info, read_window, validate_event_file
     from e4dgs.imageio import write_png
     from simulator.view import event_frame, parse_time_us, save_video
 
     try:
+        validate_event_file(args.events)      # every event and the ms index, once (windows trust the index)
         info = read_info(args.events)
         start = info["t_offset_us"]
         end = int(info.get("t_end_us", start)) + 1
@@ -162,7 +202,10 @@ def run_view(args: argparse.Namespace) -> int:
             if window <= 0 or step <= 0:
                 raise SystemExit("error: --window and --step must be positive")
             starts = range(t0, max(t0 + 1, t1 - window + 1), step)
-            frames = [event_frame(read_window(args.events, s, s + window)) for s in starts]
+            from tqdm import tqdm
+
+            frames = [event_frame(read_window(args.events, s, s + window))
+                      for s in tqdm(starts, desc="view", unit="frame")]
             save_video(args.out, frames, fps=args.fps)
             print(f"{args.out}: {len(frames)} frames of {window} us every {step} us")
         else:

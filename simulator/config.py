@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Literal
 
-from e4dgs.config import ConfigError
+from e4dgs.config import ConfigError, ConfigWarning
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,11 @@ class SimulatorConfig:
             need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
         need(isinstance(self.refractory_us, int) and self.refractory_us >= 0, "refractory_us", "a non-negative integer")
         need(finite(self.hot_pixel_fraction) and 0 <= self.hot_pixel_fraction <= 1, "hot_pixel_fraction", "a number in [0, 1]")
+        if self.threshold_sigma > 0.5 * min(self.pos_threshold, self.neg_threshold):
+            warnings.warn(f"threshold_sigma: {self.threshold_sigma} is more than half the contrast threshold "
+                          f"({min(self.pos_threshold, self.neg_threshold)}): many pixels' thresholds are clamped to "
+                          f"threshold_min ({self.threshold_min}) and fire far more events (v2e's default sigma is "
+                          "0.03)", ConfigWarning, stacklevel=3)
 
     # Which optional stages run.
     @property

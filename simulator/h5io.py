@@ -23,8 +23,9 @@ from typing import Any, Mapping
 import h5py
 import numpy as np
 
-from e4dgs.fileio import temp_path_for
+from e4dgs.fileio import remove_stale_temps, temp_path_for
 from e4dgs.config import dump_config, to_dict
+from simulator.event_check import EventContentError, check_chunk, check_event_datasets, check_structure
 from simulator.events import EVENT_DTYPE, EventStream, validate_events
 
 FORMAT_VERSION = 1
@@ -54,6 +55,7 @@ class EventFileWriter:
         self.path = Path(path)
         self.width, self.height, self.t_offset_us = int(width), int(height), int(t_offset_us)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temps(self.path)
         self._tmp = temp_path_for(self.path)
         self._file = h5py.File(self._tmp, "w")
         g = self._file.create_group("events")
@@ -153,7 +155,9 @@ def write_events(path: str | os.PathLike, stream: EventStream, t_offset_us: int 
     return Path(path)
 
 
-def _open(path: str | os.PathLike) -> h5py.File:
+def _open(path: str | os.PathLike, full_check: bool = False) -> h5py.File:
+    """Open an event file after checking its layout and structure (and, with full_check, every
+    event: simulator.event_check), each at most once per file version and process."""
     path = Path(path)
     if not path.exists():
         raise EventFileError(f"{path}: no such event file")
@@ -169,18 +173,55 @@ def _open(path: str | os.PathLike) -> h5py.File:
         if name not in f.attrs:
             f.close()
             raise EventFileError(f"{path}: missing attribute '{name}'")
+    try:
+        _validate_once(path, f, full_check)
+    except EventFileError:
+        f.close()
+        raise
     return f
 
 
+_VALIDATED: set[tuple[str, int, int, bool]] = set()
+
+
+def _validate_once(path: Path, f: h5py.File, full: bool) -> None:
+    """The checks of simulator.event_check (structure, or every event when `full`), once per file
+    version (path, size, mtime) and process."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key + (full,) in _VALIDATED or key + (True,) in _VALIDATED:
+        return
+    t_offset = f["t_offset"]
+    if t_offset.shape != () or t_offset.dtype.kind not in "iu":
+        raise EventFileError(f"{path}: t_offset: expected an integer scalar (microseconds), found "
+                             f"{t_offset.dtype.name} of shape {t_offset.shape}")
+    try:
+        (check_event_datasets if full else check_structure)(f, f.attrs["width"], f.attrs["height"])
+    except EventContentError as exc:
+        raise EventFileError(f"{path}: {exc}") from None
+    _VALIDATED.add(key + (full,))
+
+
+def validate_event_file(path: str | os.PathLike) -> None:
+    """Check every event of the file (once per file version and process); raises EventFileError."""
+    _open(path, full_check=True).close()
+
+
 def _slice(f: h5py.File, i0: int, i1: int) -> np.ndarray:
-    t_offset = int(f["t_offset"][()])
+    """Events i0 .. i1 - 1, checked as they are read (sorted, inside the sensor, polarity 0 / 1)."""
     g = f["events"]
     out = np.empty(i1 - i0, EVENT_DTYPE)
-    if i1 > i0:
-        out["t"] = g["t"][i0:i1] + t_offset
-        out["x"] = g["x"][i0:i1]
-        out["y"] = g["y"][i0:i1]
-        out["p"] = g["p"][i0:i1].astype(np.int8) * 2 - 1
+    if i1 <= i0:
+        return out
+    t, x, y, p = (g[name][i0:i1] for name in ("t", "x", "y", "p"))
+    t_before = int(g["t"][i0 - 1]) if i0 > 0 else -1
+    try:
+        check_chunk(t, x, y, p, int(f.attrs["width"]), int(f.attrs["height"]), i0, t_before)
+    except EventContentError as exc:
+        raise EventFileError(f"{f.filename}: {exc}") from None
+    out["t"] = t + int(f["t_offset"][()])
+    out["x"], out["y"] = x, y
+    out["p"] = p.astype(np.int8) * 2 - 1
     return out
 
 
@@ -194,8 +235,8 @@ def read_info(path: str | os.PathLike) -> dict[str, Any]:
 
 
 def read_events(path: str | os.PathLike) -> EventStream:
-    """The whole stream of an event file."""
-    with _open(path) as f:
+    """The whole stream of an event file (every event checked)."""
+    with _open(path, full_check=True) as f:
         n = f["events/t"].shape[0]
         return EventStream(_slice(f, 0, n), int(f.attrs["width"]), int(f.attrs["height"]))
 

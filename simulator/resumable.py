@@ -23,6 +23,10 @@ from simulator.h5io import EventFileWriter
 _CHUNK_EVENTS = 1 << 21
 
 
+class SpoolResumeError(ValueError):
+    """The spool a checkpoint refers to is missing or shorter than the checkpoint's event count."""
+
+
 class EventSpool:
     """Append-only event output of one sensor, resumable at the counts `sync()` returned."""
 
@@ -35,7 +39,7 @@ class EventSpool:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         n = int(resume_count or 0)
         if n and (not self.spool_path.exists() or self.spool_path.stat().st_size < n * EVENT_DTYPE.itemsize):
-            raise ValueError(f"{self.spool_path}: cannot resume at {n} events: the spool is missing or shorter")
+            raise SpoolResumeError(f"{self.spool_path}: cannot resume at {n} events: the spool is missing or shorter")
         self._spool = open(self.spool_path, "r+b" if n else "w+b")
         self._spool.truncate(n * EVENT_DTYPE.itemsize)
         self._last_t = np.iinfo(np.int64).min

@@ -173,30 +173,56 @@ def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
     assert max(errors) < 0.6
 
 
-def test_killed_run_resumes_to_identical_files(tmp_path):
-    preset = tmp_path / "p.yaml"
-    preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.03\n  render: {width: 64, height: 48, samples: 1}\n"
-                      "  camera: {n_cameras: 2}\n  frames: {keep_every: 10, test_every: 2}\n"
-                      "  blur: {target_px: {mild: 1.0, medium: 2.5, strong: 5.0}, max_exposure_ms: 10.0}\n"
-                      "  sensor: {shot_noise_rate_hz: 50.0, refractory_us: 40}\n")
-    assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
+RESUME_PRESET = ("scenes: [cubes]\noverrides:\n  duration_s: 0.03\n  render: {width: 64, height: 48, samples: 1}\n"
+                 "  camera: {n_cameras: 2}\n  frames: {keep_every: 10, test_every: 2}\n"
+                 "  blur: {target_px: {mild: 1.0, medium: 2.5, strong: 5.0}, max_exposure_ms: 10.0}\n"
+                 "  sensor: {shot_noise_rate_hz: 50.0, refractory_us: 40}\n")
+
+
+def _killed_after_first_checkpoint(preset: Path, out: Path) -> Path:
+    """Start generating the preset into `out` and SIGKILL it once its first checkpoint exists."""
     cmd = [sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(preset),
-           "--out", str(tmp_path / "b"), "--no-progress", "--checkpoint-every", "7"]
+           "--out", str(out), "--no-progress", "--checkpoint-every", "7"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    ckpt = tmp_path / "b" / "cubes" / ".generate.ckpt.npz"
+    ckpt = out / "cubes" / ".generate.ckpt.npz"
     deadline = time.time() + 120
     while not ckpt.exists() and proc.poll() is None and time.time() < deadline:
         time.sleep(0.005)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
+    return ckpt
+
+
+def _same_files(a: Path, b: Path) -> list[str]:
+    ma = json.loads((a / "cubes" / "manifest.json").read_text())["files"]
+    mb = json.loads((b / "cubes" / "manifest.json").read_text())["files"]
+    assert ma.keys() == mb.keys()
+    return [k for k in ma if ma[k]["sha256"] != mb[k]["sha256"]]
+
+
+def test_killed_run_resumes_to_identical_files(tmp_path):
+    preset = tmp_path / "p.yaml"
+    preset.write_text(RESUME_PRESET)
+    assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
+    ckpt = _killed_after_first_checkpoint(preset, tmp_path / "b")
     assert ckpt.exists(), "the run ended before its first checkpoint: nothing to resume"
     assert not (tmp_path / "b" / "cubes" / "manifest.json").exists()
     r = generate(tmp_path / "b", preset=str(preset))
     assert r.returncode == 0 and "resuming at timestamp" in r.stdout
-    ma = json.loads((tmp_path / "a" / "cubes" / "manifest.json").read_text())["files"]
-    mb = json.loads((tmp_path / "b" / "cubes" / "manifest.json").read_text())["files"]
-    assert ma.keys() == mb.keys()
-    assert [k for k in ma if ma[k]["sha256"] != mb[k]["sha256"]] == []
+    assert _same_files(tmp_path / "a", tmp_path / "b") == []
+
+
+def test_a_checkpoint_whose_spool_is_lost_starts_over(tmp_path):
+    preset = tmp_path / "p.yaml"
+    preset.write_text(RESUME_PRESET)
+    assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
+    ckpt = _killed_after_first_checkpoint(preset, tmp_path / "b")
+    assert ckpt.exists()
+    (tmp_path / "b" / "cubes" / "events" / ".cam1.h5.spool").unlink()
+    r = generate(tmp_path / "b", preset=str(preset))
+    assert r.returncode == 0 and "starting cubes over" in r.stdout and "resuming" not in r.stdout
+    assert _same_files(tmp_path / "a", tmp_path / "b") == []
+    assert not list((tmp_path / "b").rglob(".*.spool")) and not list((tmp_path / "b").rglob(".*.lock"))
 
 
 def test_bad_config_or_scene_fails_clearly_and_writes_nothing(tmp_path):

@@ -216,3 +216,29 @@ def test_initial_points_follow_the_scene_kind_and_options(motion_scene, tmp_path
     np.testing.assert_array_equal(given, pts)
     with pytest.raises(ConfigError, match="points_file: required"):
         recon.resolve_config("d3dgs", overrides={"train.init.kind": "points"})
+
+
+def test_kernel_compilation_is_not_training_time_and_a_resume_is_announced(motion_scene, tmp_path, monkeypatch,
+                                                                             capsys):
+    import time
+
+    import recon.trainer as trainer_mod
+
+    warmed = []
+    monkeypatch.setattr(trainer_mod, "warm_up", lambda *a: (warmed.append(a), time.sleep(1.0)))
+    cfg = {**FAST, "train.iterations": 6, "train.checkpoint_every": 2, "train.init.n_points_object": 200,
+           "train.snapshots": [1.0]}
+
+    def kill_at_3(trainer, it):
+        if it == 3:
+            raise Killed
+
+    with pytest.raises(Killed):
+        recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "run", progress=False, on_iteration=kill_at_3)
+    capsys.readouterr()
+    recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "run", progress=True)
+    captured = capsys.readouterr()
+    assert "d3dgs: resuming" in captured.out + captured.err and "at iteration 2 of 6" in captured.out + captured.err
+    log = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
+    assert len(warmed) == 2 and warmed[0][0] == "cpu" and warmed[0][2] == 3
+    assert log[-1]["iteration"] == 6 and log[-1]["wall_s"] < 1.0     # two 1-second warm-ups, neither counted

@@ -82,3 +82,18 @@ def render(means, quats, scales, opacities, colors, camera: Camera, background, 
     image, alpha, depth, max_w = raster(means2d, conics, depths, radii, opacities, colors, background,
                                         camera.width, camera.height)
     return RenderOutput(image, alpha, depth, radii, means2d, max_w)
+
+
+def warm_up(backend: str, device: torch.device | str = "cpu", channels: int = 3, dtype=torch.float32) -> None:
+    """Render two Gaussians forward and backward once, so kernel compilation (numba's first call,
+    gsplat's CUDA build) happens here and not inside a timed training step."""
+    device = torch.device(device)
+    backend = resolve_backend(backend, device)
+    kw = {"dtype": dtype, "device": device}
+    means = torch.tensor([[0.0, 0.0, 3.0], [0.1, 0.0, 3.5]], **kw).requires_grad_(True)
+    quats = torch.tensor([[1.0, 0.0, 0.0, 0.0]] * 2, **kw)
+    scales = torch.full((2, 3), 0.2, **kw)
+    camera = Camera(torch.tensor([[8.0, 0, 4], [0, 8.0, 4], [0, 0, 1]], **kw), torch.eye(4, **kw), 8, 8)
+    out = render(means, quats, scales, torch.full((2,), 0.5, **kw), torch.full((2, channels), 0.5, **kw),
+                 camera, torch.zeros(channels, **kw), backend)
+    out.image.sum().backward()
