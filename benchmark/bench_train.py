@@ -129,7 +129,13 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
     from datagen.dataset import SceneDataset
     from recon.config import E4DGSConfig
     from recon.methods import get_method
-    from recon.methods.e4dgs import E4DGS
+    try:
+        from recon.methods.e4dgs import importance
+    except ImportError:   # an older tree timed with --against: the method's own pruning importance
+        from recon.methods.e4dgs import E4DGS
+
+        def importance(model, ds, n_times):
+            return E4DGS.for_evaluation(ds, E4DGSConfig()).importance(model)
     from recon.trainer import Trainer
 
     # the random initial haze (the slowest case; the quick E-4DGS recipe now carves its initial points
@@ -142,9 +148,9 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
     trainer.setup()
     model = trainer.model
     if phase == "late":   # E-4DGS's intensity-importance pruning, whatever the method
-        iip = E4DGS.for_evaluation(ds, E4DGSConfig())
+        events = E4DGSConfig().events
         with torch.no_grad():
-            model.gaussians.prune(iip.importance(model) >= iip.cfg.events.iip_threshold)
+            model.gaussians.prune(importance(model, ds, events.iip_times) >= events.iip_threshold)
         trainer.optimizer = trainer._optimizer()
     for group in trainer.optimizer.param_groups:
         group["lr"] = 0.0

@@ -28,7 +28,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
     from benchmark.config import MAIN_CELLS, load_bench
     from benchmark.report import write_report
     from benchmark.runner import read_results, run_bench
-    from e4dgs.config import ConfigError
+    from common.config import ConfigError
 
     try:
         cfg = load_bench(args.preset)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from e4dgs.config import ConfigError, build_config, to_dict
+from common.config import ConfigError, build_config, to_dict
 
 REPO = Path(__file__).resolve().parent.parent
 PRESET_DIR = REPO / "configs" / "bench"
@@ -36,8 +36,7 @@ class BlurStudy:
     scene: str = ""                       # "" : no blur study
     levels: tuple[str, ...] = ("mild", "medium", "strong")
     cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
-    level_key: dict[str, str] = field(default_factory=lambda: {"d3dgs": "frames", "deblur_d3dgs": "frames",
-                                                               "e4dgs_rgb": "rgb_frames"})
+    # each level is set through the config field its method names (Method.blur_level_field)
 
 
 @dataclass(frozen=True)
@@ -128,9 +127,11 @@ def jobs(cfg: BenchConfig) -> list[Job]:
             out.append(Job("main", scene, name, "", c.method, c.config, dict(c.overrides)))
     b = cfg.blur
     if b.scene:
+        from recon.methods import get_method
+
         for name in b.cells:
             c = cfg.cells[name]
-            key = b.level_key.get(c.method)
+            key = get_method(c.method).blur_level_field
             for level in b.levels:
                 if key is None:      # the method never sees RGB frames: blur cannot change it
                     continue

@@ -15,7 +15,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from benchmark.config import LABELS, MAIN_CELLS
-from e4dgs.fileio import atomic_output, write_text_atomic
+from common.fileio import atomic_output, write_text_atomic
 
 METRICS = (("psnr", "PSNR↑", True), ("ssim", "SSIM↑", True), ("lpips", "LPIPS↓", False))
 

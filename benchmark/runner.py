@@ -13,35 +13,21 @@ against training wall-clock seconds, iterations, Gaussian count, package version
 from __future__ import annotations
 
 import json
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
 from benchmark.config import REPO, BenchConfig, Job, dump, jobs
-from benchmark.metrics.image import score_pairs
+from common.metrics.image import score_pairs
 from datagen.dataset import SceneDataset
-from e4dgs.fileio import write_text_atomic
+from common import provenance
+from common.fileio import write_text_atomic
+from common.provenance import git_commit
 
 
 def versions() -> dict:
-    import torch
-
-    import e4dgs
-    return {"toolkit": e4dgs.__version__, "python": platform.python_version(), "numpy": np.__version__,
-            "torch": torch.__version__}
-
-
-def git_commit() -> str | None:
-    try:
-        r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, timeout=5)
-        return r.stdout.strip() or None
-    except OSError:
-        return None
+    return provenance.versions("torch")
 
 
 def read_results(path: Path) -> list[dict]:
@@ -65,13 +51,12 @@ def ensure_dataset(cfg: BenchConfig, data_root: Path, log: Callable[[str], None]
     missing = [s for s in cfg.scenes if not (data_root / s / "manifest.json").exists()]
     if not missing:
         return
-    from e4dgs.cli import main as cli_main
+    from datagen.build import generate_dataset
 
     log(f"bench: generating dataset {cfg.dataset} for {', '.join(missing)} -> {data_root}")
-    rc = cli_main(["dataset", "--preset", cfg.dataset, "--scenes", ",".join(missing), "--out", str(data_root),
-                   "--jobs", str(min(2, len(missing)))])
-    if rc != 0:
-        raise RuntimeError(f"dataset generation failed for {', '.join(missing)} (run `e4dgs bench` again to resume)")
+    failed = generate_dataset(cfg.dataset, missing, data_root, jobs=min(2, len(missing)), log=log)
+    if failed:
+        raise RuntimeError(f"dataset generation failed for {', '.join(failed)} (run `e4dgs bench` again to resume)")
 
 
 def evaluate_model(method_obj, model, records, lpips_net: str | None, placement=None) -> dict:
@@ -80,21 +65,31 @@ def evaluate_model(method_obj, model, records, lpips_net: str | None, placement=
     return score_pairs(method_obj.eval_pairs(model.to(device), records, backend), lpips_net=lpips_net)
 
 
-def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool) -> dict:
-    from recon.api import fit, resolve_config
+def resolve_job(job: Job):
+    """The typed method config of a job (its config file plus overrides); ConfigError names the job."""
+    from common.config import ConfigError
+    from recon.api import resolve_config
+
+    try:
+        return resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides)
+    except (ConfigError, ValueError) as exc:
+        raise ConfigError(f"bench job {job.key} ({job.method}, {job.config or 'defaults'}): {exc}") from None
+
+
+def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool, method_cfg=None) -> dict:
+    from recon.api import fit
     from recon.device import run_placement
     from recon.methods import get_method
     from recon.model import load
 
+    method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
     scene_dir = data_root / job.scene
     run_dir = out_root / job.scene / f"{job.method}-{job.config_hash()}"
     t0 = time.time()
-    model = fit(scene_dir, job.method, str(REPO / job.config) if job.config else None, run_dir, job.overrides,
-                progress=progress)
+    model = fit(scene_dir, job.method, method_cfg, run_dir, progress=progress)
     train_elapsed = time.time() - t0
     dataset = SceneDataset(scene_dir)
-    method_cfg = resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides)
-    scorer = get_method(job.method).for_evaluation(dataset, method_cfg)
+    scorer = get_method(job.method).scorer(dataset, method_cfg)
     placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
     records = dataset.frames("test")
     t1 = time.time()
@@ -131,6 +126,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     todo = [j for j in jobs(cfg) if j.study in studies and (not scenes or j.scene in scenes)
             and (not cells or j.cell in cells)]
     needed = sorted({j.scene for j in todo})
+    resolved = {j.key: resolve_job(j) for j in todo}   # every job's config, checked before any work
     t_start = time.time()
     ensure_dataset(BenchConfig(**{**cfg.__dict__, "scenes": tuple(needed)}), data_root, log)
     dataset_s = time.time() - t_start
@@ -148,7 +144,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
         if (job.key, job.config_hash()) in done:
             continue
         log(f"bench [{n}/{len(todo)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
-        row = run_job(job, cfg, data_root, out_root, progress)
+        row = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
         rows = [r for r in rows if r["key"] != job.key] + [row]
         write_results(results_path, rows)
         log(f"bench [{n}/{len(todo)}] {job.key}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "

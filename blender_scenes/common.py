@@ -12,7 +12,12 @@ import bpy
 import bmesh
 import numpy as np
 
-from datagen.render import frame_of
+ANIM_FRAMES = 1000  # scene animation spans Blender frames 1 .. 1 + ANIM_FRAMES over normalised time [0, 1]
+
+
+def frame_of(tau: float) -> float:
+    """Blender frame number of normalised clip time tau in [0, 1] (scene builders keyframe with it)."""
+    return 1.0 + ANIM_FRAMES * tau
 
 _image_cache: dict[str, bpy.types.Image] = {}
 

@@ -4,7 +4,7 @@ Not part of the dataset: the tests check that the blur measurement, which tracks
 parts, refuses it instead of measuring it wrong.
 """
 from blender_scenes import common as C
-from datagen.render import frame_of
+from blender_scenes.common import frame_of
 
 
 def build(cfg) -> None:

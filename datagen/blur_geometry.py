@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from datagen.blur import exposure_window
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 
 NEAR_M = 0.01  # points nearer than this to the camera plane are not projected (no finite path)
 

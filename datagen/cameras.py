@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 
 FLIP_YZ = np.diag([1.0, -1.0, -1.0, 1.0])
 

@@ -2,12 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import subprocess
 import sys
-import time
 from pathlib import Path
 
-from e4dgs.argtypes import positive_int
+from common.argtypes import positive_int
 
 
 def add_dataset_parser(sub) -> None:
@@ -23,40 +21,12 @@ def add_dataset_parser(sub) -> None:
 
 
 def run_dataset(args: argparse.Namespace) -> int:
-    from datagen.config import load_preset
-    from e4dgs.config import ConfigError
+    from datagen.build import generate_dataset, preset_scenes
 
-    try:
-        preset = load_preset(args.preset)
-    except ConfigError as exc:
-        raise SystemExit(f"error: {exc}") from None
-    scenes = list(preset.scenes)
-    if args.scenes:
-        wanted = [s.strip() for s in args.scenes.split(",") if s.strip()]
-        unknown = [s for s in wanted if s not in scenes]
-        if unknown:
-            raise SystemExit(f"error: --scenes: {', '.join(unknown)} not in preset {args.preset!r} "
-                             f"(it has {', '.join(scenes)})")
-        scenes = wanted
+    wanted = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
+    scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
-    print(f"dataset: preset {args.preset}, {len(scenes)} scene(s) -> {out} ({args.jobs} at a time)")
-    t0 = time.time()
-    pending = list(enumerate(scenes))
-    running: list[tuple[str, subprocess.Popen]] = []
-    failed = []
-    while pending or running:
-        while pending and len(running) < args.jobs:
-            slot, scene = pending.pop(0)
-            cmd = [sys.executable, "-m", "datagen.generate", "--scene", scene, "--preset", str(args.preset),
-                   "--out", str(out), "--checkpoint-every", str(args.checkpoint_every), "--position", str(len(running))]
-            running.append((scene, subprocess.Popen(cmd)))
-        for scene, proc in list(running):
-            if proc.poll() is not None:
-                running.remove((scene, proc))
-                if proc.returncode != 0:
-                    failed.append(scene)
-        time.sleep(0.2)
-    print(f"dataset: {len(scenes) - len(failed)} of {len(scenes)} scene(s) done in {time.time() - t0:.0f} s -> {out}")
+    failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every)
     done = [s for s in scenes if s not in failed]
     if done and out.is_dir():
         from datagen.summary import blur_table

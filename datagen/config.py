@@ -12,9 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Mapping
 
-import yaml
 
-from e4dgs.config import ConfigError, check_positive, from_dict
+from common.config import ConfigError, check_positive, from_dict, read_yaml_mapping
 from simulator.config import SimulatorConfig
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -195,18 +194,6 @@ def deep_merge(base: Mapping, override: Mapping) -> dict:
     return out
 
 
-def _read_yaml(path: Path) -> dict:
-    try:
-        data = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    if not isinstance(data, Mapping):
-        raise ConfigError(f"{path}: expected a mapping at the top level")
-    return dict(data)
-
-
 def scene_yaml_path(name: str) -> Path:
     if name not in SCENE_NAMES and not (SCENES_DIR / f"{name}.yaml").exists():
         raise ConfigError(f"unknown scene {name!r}: expected one of {', '.join(SCENE_NAMES)}")
@@ -219,7 +206,7 @@ def load_preset(preset: str | Path) -> PresetConfig:
         known = sorted(p.stem.removeprefix("dataset_") for p in PRESETS_DIR.glob("dataset_*.yaml"))
         raise ConfigError(f"unknown dataset preset {str(preset)!r} (no {path}); known presets: {', '.join(known)}")
     try:
-        preset_cfg = from_dict(PresetConfig, _read_yaml(path))
+        preset_cfg = from_dict(PresetConfig, read_yaml_mapping(path))
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     for name in preset_cfg.scenes:   # every scene must build with the preset's overrides: blame the right file
@@ -236,7 +223,7 @@ def resolve_scene(name: str, overrides: Mapping[str, Any] | None = None,
                   scene_file: str | Path | None = None) -> SceneConfig:
     """Scene YAML (or `scene_file`) with `overrides` merged in, parsed strictly."""
     path = Path(scene_file) if scene_file else scene_yaml_path(name)
-    data = deep_merge(_read_yaml(path), overrides or {})
+    data = deep_merge(read_yaml_mapping(path), overrides or {})
     try:
         cfg = from_dict(SceneConfig, data)
     except ConfigError as exc:

@@ -14,8 +14,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -23,18 +21,20 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-import e4dgs
+import common
+from common import provenance
+from common.provenance import git_commit as _git_commit
 from datagen import render as R
 from datagen.blur import BlurStack
 from datagen.blur_geometry import BlurReport, measure_blur
 from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, scene_poses
 from datagen.config import SceneConfig, load_preset, resolve_scene
 from datagen.preview import blur_psnr, contact_sheet
-from e4dgs.checkpoint import JobCheckpoint
-from e4dgs.config import ConfigError, dump_config
-from e4dgs.argtypes import positive_int
-from e4dgs.fileio import output_lock, sha256_file, write_text_atomic
-from e4dgs.imageio import write_exr, write_png_srgb
+from common.checkpoint import JobCheckpoint
+from common.config import ConfigError, dump_config
+from common.argtypes import positive_int
+from common.fileio import output_lock, sha256_file, write_text_atomic
+from common.imageio import write_exr, write_png_srgb
 from simulator.h5io import read_info, simulator_attrs
 from simulator.pixel import rec709_luma
 from simulator.events import EVENT_DTYPE
@@ -45,27 +45,15 @@ FORMAT_VERSION = 1
 
 
 def config_fingerprint(cfg: SceneConfig) -> str:
-    return hashlib.sha256(f"{FORMAT_VERSION}\n{e4dgs.__version__}\n{dump_config(cfg)}".encode()).hexdigest()
+    return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{dump_config(cfg)}".encode()).hexdigest()
 
 
 def timestamps_us(cfg: SceneConfig) -> np.ndarray:
     return np.round(np.arange(cfg.n_timestamps) * 1e6 / cfg.render.fps).astype(np.int64)
 
 
-def _git_commit() -> str | None:
-    try:
-        r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5)
-        return r.stdout.strip() or None
-    except OSError:
-        return None
-
-
 def _versions() -> dict:
-    import h5py
-    import numba
-
-    return {"toolkit": e4dgs.__version__, "python": platform.python_version(), "numpy": np.__version__,
-            "bpy": R.blender_version(), "numba": numba.__version__, "h5py": h5py.__version__}
+    return provenance.versions("numba", "h5py", bpy=R.blender_version())
 
 
 class SceneJob:

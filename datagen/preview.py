@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 
 from datagen.dataset import SceneDataset
-from e4dgs.imageio import write_png
-from e4dgs.metrics import psnr
+from common.imageio import write_png
+from common.metrics import psnr
 from simulator.h5io import read_window
 from simulator.view import event_frame
 

@@ -18,15 +18,10 @@ import numpy as np
 
 from datagen.cameras import FLIP_YZ, Intrinsics
 from datagen.config import SceneConfig
-from e4dgs.imageio import read_exr
+from blender_scenes.common import ANIM_FRAMES, frame_of
+from common.imageio import read_exr
 
-ANIM_FRAMES = 1000  # scene animation spans Blender frames 1 .. 1 + ANIM_FRAMES over normalised time [0, 1]
 ENGINE_IDS = {"workbench": "BLENDER_WORKBENCH", "cycles": "CYCLES", "eevee": "BLENDER_EEVEE"}
-
-
-def frame_of(tau: float) -> float:
-    """Blender frame number of normalised clip time tau in [0, 1] (scene builders keyframe with it)."""
-    return 1.0 + ANIM_FRAMES * tau
 
 
 def reset_scene() -> bpy.types.Scene:

@@ -11,7 +11,7 @@ import numpy as np
 from mathutils.bvhtree import BVHTree
 
 from datagen import render as R
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 
 
 class RigidMotionError(ConfigError):

@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from e4dgs.fileio import sha256_file
+from common.fileio import sha256_file
 from simulator.h5io import EventFileError, read_info
 
 

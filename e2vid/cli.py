@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from e4dgs.argtypes import nonnegative_int, positive_float, positive_int
+from common.argtypes import nonnegative_int, positive_float, positive_int
 
 
 def add_train_e2vid_parser(sub) -> None:
@@ -26,8 +26,8 @@ def add_train_e2vid_parser(sub) -> None:
 def run_train_e2vid(args: argparse.Namespace) -> int:
     from e2vid.evaluate import evaluate_heldout
     from e2vid.train import E2VIDTrainConfig, E2VIDTrainer
-    from e4dgs.config import ConfigError, build_config, parse_set
-    from e4dgs.fileio import write_text_atomic
+    from common.config import ConfigError, build_config, parse_set
+    from common.fileio import write_text_atomic
 
     try:
         cfg = build_config(E2VIDTrainConfig, args.config, parse_set(args.overrides))
@@ -42,7 +42,7 @@ def run_train_e2vid(args: argparse.Namespace) -> int:
     write_text_atomic(args.out / "report.json", json.dumps(report, indent=1))
     if args.export:
         from e2vid.report import training_report_md
-        from e4dgs.config import dump_config
+        from common.config import dump_config
 
         trainer.export(args.export, {"heldout": report})
         overrides = " ".join(f"--set {o}" for o in args.overrides)
@@ -74,8 +74,8 @@ def run_e2vid(args: argparse.Namespace) -> int:
     from e2vid.official import CheckpointError, load_checkpoint
     from e2vid.reconstruct import reconstruct_frames
     from e2vid.weights import default_weights_path
-    from e4dgs.fileio import write_text_atomic
-    from e4dgs.imageio import write_png
+    from common.fileio import write_text_atomic
+    from common.imageio import write_png
     from simulator.h5io import EventFileError, read_events
 
     try:

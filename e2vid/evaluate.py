@@ -4,7 +4,7 @@ Sequences come from seeds >= synth.VAL_SEED_BASE (never used for training), are 
 training sequences and at a different size. Scores are per-frame PSNR / SSIM against the sharp
 frames, averaged, skipping the first `skip` frames (every method needs events before it can show
 anything). The network is scored raw and after the log-intensity gain/offset fit E-4DGS is scored
-with (recon.color); the high-pass filter, whose output has no absolute level, only after the fit.
+with (common.color_correction); the high-pass filter, whose output has no absolute level, only after the fit.
 PSNR and SSIM on low-contrast clips are dominated by the mean level (a flat grey image scores well),
 so `corr`, the per-frame Pearson correlation with the ground truth, reports structure alone.
 """
@@ -16,11 +16,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from benchmark.metrics.image import score_pairs
+from common.metrics.image import score_pairs
 from e2vid.networks import Reconstructor
 from e2vid.reconstruct import hpf_display, hpf_log_frames
 from e2vid.synth import VAL_SEED_BASE, SynthConfig, make_sequence
-from recon.color import correct_colors
+from common.color_correction import correct_colors
 
 HELDOUT = SynthConfig(height=112, width=144, n_steps=24)
 

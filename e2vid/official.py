@@ -82,7 +82,7 @@ def load_checkpoint(path: str | Path) -> tuple[torch.nn.Module, dict[str, Any]]:
 
 def save_checkpoint(path: str | Path, net: torch.nn.Module, **extra: Any) -> Path:
     """Write `net` in the official layout (plus `extra` entries) atomically."""
-    from e4dgs.fileio import atomic_output
+    from common.fileio import atomic_output
 
     cfg: NetConfig = net.cfg
     arch = "FireNet" if cfg.arch == "firenet" else "E2VIDRecurrent"

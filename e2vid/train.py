@@ -43,8 +43,8 @@ from e2vid.evaluate import mean_correlation, monitor_sequences
 from e2vid.networks import FIRENET, NetConfig, build_network
 from e2vid.official import save_checkpoint
 from e2vid.synth import VAL_SEED_BASE, Sequence, SynthConfig, make_batch
-from e4dgs.config import ConfigError, check_positive, dump_config
-from e4dgs.fileio import atomic_output
+from common.config import ConfigError, check_positive, dump_config
+from common.fileio import atomic_output
 
 
 @dataclass(frozen=True)
@@ -159,7 +159,7 @@ class E2VIDTrainer:
         self.best: dict | None = None          # {iteration, monitor_corr, net}: best by monitor correlation
         self.lpips = None
         if cfg.lpips_net != "none" and cfg.lambda_lpips > 0:
-            from benchmark.metrics.lpips import LPIPS
+            from common.metrics.lpips import LPIPS
             self.lpips = LPIPS(cfg.lpips_net)
 
     @property

@@ -1,3 +1,2 @@
-"""Shared base of the toolkit: strict configs, atomic file output and the `e4dgs` command line."""
-
-__version__ = "0.1.0"
+"""The `e4dgs` command line (the top of the toolkit; every library package is below it)."""
+from common import __version__  # noqa: F401

@@ -12,7 +12,7 @@ import os
 import sys
 import warnings
 
-from e4dgs.config import ConfigWarning
+from common.config import ConfigWarning
 
 
 def build_parser() -> argparse.ArgumentParser:

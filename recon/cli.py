@@ -24,7 +24,7 @@ def add_train_parser(sub) -> None:
 
 def run_train(args: argparse.Namespace) -> int:
     from datagen.dataset import DatasetError
-    from e4dgs.config import ConfigError
+    from common.config import ConfigError
     from recon.api import fit, parse_set
     from recon.trainer import TrainingError
 
@@ -85,7 +85,7 @@ def camera_from_json(path: Path):
 
 
 def run_render(args: argparse.Namespace) -> int:
-    from e4dgs.imageio import write_png
+    from common.imageio import write_png
     from recon.model import load
 
     try:

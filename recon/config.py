@@ -1,4 +1,4 @@
-"""Typed configs of the reconstruction methods (strict YAML through `e4dgs.config`).
+"""Typed configs of the reconstruction methods (strict YAML through `common.config`).
 
 Schedules are written for the public D3DGS budget (40,000 iterations) and, with
 `scale_schedule: true`, scaled to the run's `iterations` (see `Schedule`), so a short CPU run keeps
@@ -17,7 +17,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Literal
 
-from e4dgs.config import ConfigError, check_positive
+from common.config import ConfigError, check_positive
 
 REFERENCE_ITERATIONS = 40_000
 MIN_DENSIFY_INTERVAL = 10

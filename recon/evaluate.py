@@ -1,11 +1,11 @@
-"""Held-out evaluation used during training (the benchmark's full metrics live in benchmark/metrics)."""
+"""Held-out evaluation used during training (the benchmark's full metrics live in common/metrics)."""
 from __future__ import annotations
 
 from typing import Iterable
 
 import numpy as np
 
-from e4dgs.metrics import psnr
+from common.metrics import psnr
 
 
 def evaluate_psnr(pairs: Iterable[tuple[np.ndarray, np.ndarray]]) -> float:

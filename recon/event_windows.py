@@ -9,12 +9,11 @@ few to settle ties), so a draw never scans the stream.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
-import h5py
 import numpy as np
 
-from simulator.h5io import EventFileError, read_info, validate_event_file, window_indices
+from simulator.event_file import EventFile
+from simulator.h5io import EventFileError
 
 _TIE_PAD = 1024   # extra rows read past the window to include events sharing its end time
 
@@ -32,32 +31,12 @@ class EventWindow:
         return len(self.x)
 
 
-class EventSource:
-    """One camera's event file, opened once, with random access by event index."""
-
-    def __init__(self, path: str | Path):
-        self.path = Path(path)
-        validate_event_file(self.path)
-        self.info = read_info(self.path)
-        self.n = int(self.info["n_events"])
-        self.width, self.height = int(self.info["width"]), int(self.info["height"])
-        self.t_offset = int(self.info["t_offset_us"])
-        self._f = h5py.File(self.path, "r")
-        self._g = self._f["events"]
+class EventSource(EventFile):
+    """One camera's event file (simulator.event_file.EventFile), with ESS windows cut by event index."""
 
     def thresholds(self) -> tuple[float, float]:
-        try:
-            return float(self.info["sim_pos_threshold"]), float(self.info["sim_neg_threshold"])
-        except KeyError:
-            raise EventFileError(f"{self.path}: no sim_pos_threshold / sim_neg_threshold attributes (needed for "
-                                 "the ground-truth event counts)") from None
-
-    def times(self, i0: int, i1: int) -> np.ndarray:
-        return self._g["t"][i0:i1].astype(np.int64) + self.t_offset
-
-    def rows(self, i0: int, i1: int):
-        p = self._g["p"][i0:i1].astype(np.int8) * 2 - 1
-        return self._g["x"][i0:i1], self._g["y"][i0:i1], p
+        """The sensor's nominal contrast thresholds (C+, C-), from the stored simulator config."""
+        return float(self.sensor.pos_threshold), float(self.sensor.neg_threshold)
 
     def window(self, camera: int, i0: int, n: int) -> EventWindow:
         """Events i0 .. i0 + n - 1 as a (t_start, t_end] window (1 <= i0, i0 + n <= n_events)."""
@@ -71,12 +50,9 @@ class EventSource:
 
     def window_between(self, camera: int, t_start_us: int, t_end_us: int) -> EventWindow:
         """This camera's events with t_start < t <= t_end (the same time window as another camera's)."""
-        i0, i1 = window_indices(self._f, t_start_us + 1, t_end_us + 1)
+        i0, i1 = self.indices(t_start_us + 1, t_end_us + 1)
         x, y, p = self.rows(i0, i1)
         return EventWindow(camera, t_start_us, t_end_us, x, y, p)
-
-    def close(self) -> None:
-        self._f.close()
 
 
 class WindowSampler:

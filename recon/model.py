@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from datagen.cameras import CameraTrajectory, Intrinsics
-from e4dgs.fileio import atomic_output
+from common.fileio import atomic_output
 from recon.deform import DeformationField
 from recon.gaussians import GaussianModel
 from recon.raster import Camera, RenderOutput

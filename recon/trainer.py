@@ -25,8 +25,8 @@ import torch
 from tqdm import tqdm
 
 from datagen.dataset import SceneDataset
-from e4dgs.config import dump_config, to_dict
-from e4dgs.fileio import atomic_output, output_lock, write_text_atomic
+from common.config import dump_config, to_dict
+from common.fileio import atomic_output, output_lock, write_text_atomic
 from recon import init as initial
 from recon.config import TrainConfig
 from recon.deform import DeformationField
@@ -37,7 +37,8 @@ from recon.evaluate import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
-from recon.views import gray_from_srgb, load_frame, record_camera
+from recon.method import Method  # noqa: F401  (re-exported: methods subclass it)
+from recon.views import gray_from_srgb
 from simulator.pixel import linear_to_srgb, rec709_luma
 
 CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
@@ -45,64 +46,6 @@ CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
 
 class TrainingError(RuntimeError):
     """Training cannot go on (non-finite loss, every Gaussian pruned, a foreign output folder)."""
-
-
-class Method:
-    """Hooks a method implements (subclass it and `@register` it)."""
-    name = ""
-    config_cls: type = object
-
-    def __init__(self, dataset: SceneDataset, cfg: Any):
-        self.dataset, self.cfg = dataset, cfg
-
-    @classmethod
-    def for_evaluation(cls, dataset: SceneDataset, cfg: Any) -> "Method":
-        """An instance for `eval_pairs` / `channels` only: no training data loaded or reconstructed."""
-        obj = cls.__new__(cls)
-        Method.__init__(obj, dataset, cfg)
-        return obj
-
-    def channels(self) -> int:
-        raise NotImplementedError
-
-    def setup_model(self, model: DynamicGaussians) -> None:
-        """Adjust a freshly initialised model (e.g. give it deformation anchors)."""
-
-    def to_device(self, device: torch.device) -> None:
-        """Move the method's training data (targets, cameras) and parameters to the run's device
-        (called once, before the optimizer is built)."""
-
-    def extra_parameters(self) -> list[dict]:
-        """Additional Adam groups (dicts with params, lr, name)."""
-        return []
-
-    def step(self, trainer: "Trainer", iteration: int):
-        """Loss of one iteration -> (loss tensor, [(RenderOutput, Camera)] whose means2d kept their grad)."""
-        raise NotImplementedError
-
-    def prune_mask(self, trainer: "Trainer", iteration: int) -> torch.Tensor | None:
-        """Gaussians to prune at this iteration (bool [N]) or None (called every iteration, after backward)."""
-        return None
-
-    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-        """What is applied to a prediction before it is scored (identity; E-4DGS: colour correction)."""
-        return pred
-
-    def eval_pairs(self, model: DynamicGaussians, records, backend: str = "auto") -> list[tuple[np.ndarray, np.ndarray]]:
-        """(prediction, ground truth) images [H, W, C] in [0, 1] on the CPU for held-out records,
-        rendered on the model's device with `backend`."""
-        pairs = []
-        for rec in records:
-            gt = load_frame(self.dataset, rec, self.channels())
-            pred = model.render_numpy(record_camera(self.dataset, rec), rec.time, backend)
-            pairs.append((self.correct(pred, gt), gt))
-        return pairs
-
-    def state_dict(self) -> dict:
-        return {}
-
-    def load_state_dict(self, state: dict) -> None:
-        pass
 
 
 def scene_extent(dataset: SceneDataset) -> float:
@@ -300,82 +243,103 @@ class Trainer:
         with output_lock(self.out):
             return self._run()
 
-    def _run(self) -> DynamicGaussians:
-        final = self.out / "model.pt"
-        self._check_out_dir()
-        if final.exists():
-            return load(final)
-        resumed = self._load_checkpoint()
-        if not resumed:
+    # -- the steps of one run --------------------------------------------------------------------
+    def _start(self) -> None:
+        """Resume the checkpoint (saying so) or set up a fresh model; compile the rasterizer untimed."""
+        if not self._load_checkpoint():
             self.setup()
         elif self.progress:
             tqdm.write(f"{self.method.name}: resuming {self.out} at iteration {self.iteration} of "
                        f"{self.tcfg.iterations} ({self.wall_s:.0f} s trained so far)")
         # kernel compilation (numba's first call, gsplat's CUDA build) is not training time
         warm_up(self.backend, self.device, self.method.channels())
+
+    def _optimise(self, it: int):
+        """Schedules for iteration `it`, the method's loss and its backward -> (loss value, renders)."""
         cfg, sched = self.tcfg, self.sched
+        self._update_lrs(it)
+        g = self.model.gaussians
+        g.active_sh_degree = min(cfg.sh_degree, it // sched.sh_interval)
+        self.model.meta.active_sh_degree = g.active_sh_degree
+        self.model.meta.deform_enabled = cfg.deform and it > sched.warm_up
+        loss, renders = self.method.step(self, it)
+        loss_value = float(loss.detach())
+        if not math.isfinite(loss_value):
+            raise TrainingError(f"{self.method.name}: loss is {loss.item()} at iteration {it}; stopping "
+                                "(the last checkpoint is kept)")
+        loss.backward()
+        return loss_value, renders
+
+    def _adapt_density(self, it: int, renders) -> dict:
+        """Densification statistics, clone / split / prune (with the method's own pruning, E-4DGS's
+        IIP) and opacity resets at their iterations; returns the counts (empty if nothing changed)."""
+        cfg, sched, g = self.tcfg, self.sched, self.model.gaussians
+        d = cfg.densify
+        info = {}
+        extra = self.method.prune_mask(self, it)
+        densify_now = d.enabled and sched.densify_start < it < sched.densify_stop and it % sched.densify_interval == 0
+        if d.enabled and it < sched.densify_stop:
+            for out, cam in renders:
+                self.stats.add(out, cam.width, cam.height)
+        if densify_now:
+            if g.anchors is not None:  # deformation inputs follow the means between edits
+                g.anchors = g.means.detach().clone()
+            info = densify_and_prune(g, self.stats, d, self.extent, self.optimizer,
+                                     prune_large=it > sched.opacity_reset_interval,
+                                     generator=self.torch_gen, extra_prune=extra)
+        elif extra is not None and bool(extra.any()):
+            g.prune(~extra, self.optimizer)
+            self.stats.keep(~extra)
+            info = {"pruned": int(extra.sum())}
+        if d.enabled and d.opacity_reset and it < sched.densify_stop and it % sched.opacity_reset_interval == 0:
+            reset_opacity(g, self.optimizer)
+        if len(g) == 0:
+            raise TrainingError(f"{self.method.name}: every Gaussian was pruned at iteration {it} "
+                                f"({info}); nothing is left to render")
+        return info
+
+    def _record(self, it: int, loss_value: float, info: dict, snaps: set[int]) -> dict:
+        """The log row of iteration `it`, with test PSNR and a snapshot at their iterations."""
+        cfg = self.tcfg
+        row = {"iteration": it, "wall_s": round(self.wall_s, 3), "loss": round(loss_value, 6),
+               "n_gaussians": len(self.model)}
+        do_eval = it in snaps or (cfg.eval_every and it % cfg.eval_every == 0)
+        if do_eval:
+            self.model.meta.iteration = it
+            row["test_psnr"] = round(self.evaluate(), 3)
+            if it in snaps:
+                self.model.save(self.out / "snapshots" / f"iter_{it:06d}.pt")
+                row["snapshot"] = f"snapshots/iter_{it:06d}.pt"
+        if info:
+            row["densify"] = info
+        if do_eval or info or it % 10 == 0 or it == 1:
+            self.log.append(row)
+        return row
+
+    def _run(self) -> DynamicGaussians:
+        final = self.out / "model.pt"
+        self._check_out_dir()
+        if final.exists():
+            return load(final)
+        self._start()
         snaps = self._snapshot_iterations()
-        bar = tqdm(total=cfg.iterations, initial=self.iteration, disable=not self.progress,
+        bar = tqdm(total=self.tcfg.iterations, initial=self.iteration, disable=not self.progress,
                    desc=f"{self.method.name} {self.dataset.config.name}", dynamic_ncols=True)
-        while self.iteration < cfg.iterations:
+        while self.iteration < self.tcfg.iterations:
             it = self.iteration + 1
             t0 = time.perf_counter()
-            self._update_lrs(it)
-            g = self.model.gaussians
-            g.active_sh_degree = min(cfg.sh_degree, it // sched.sh_interval)
-            self.model.meta.active_sh_degree = g.active_sh_degree
-            self.model.meta.deform_enabled = cfg.deform and it > sched.warm_up
-            loss, renders = self.method.step(self, it)
-            loss_value = float(loss.detach())
-            if not math.isfinite(loss_value):
-                raise TrainingError(f"{self.method.name}: loss is {loss.item()} at iteration {it}; stopping "
-                                    "(the last checkpoint is kept)")
-            loss.backward()
-            info = {}
+            loss_value, renders = self._optimise(it)
             with torch.no_grad():
-                d = cfg.densify
-                extra = self.method.prune_mask(self, it)   # a method's own pruning (E-4DGS: IIP)
-                densify_now = d.enabled and sched.densify_start < it < sched.densify_stop and \
-                    it % sched.densify_interval == 0
-                if d.enabled and it < sched.densify_stop:
-                    for out, cam in renders:
-                        self.stats.add(out, cam.width, cam.height)
-                if densify_now:
-                    if g.anchors is not None:  # deformation inputs follow the means between edits
-                        g.anchors = g.means.detach().clone()
-                    info = densify_and_prune(g, self.stats, d, self.extent, self.optimizer,
-                                             prune_large=it > sched.opacity_reset_interval,
-                                             generator=self.torch_gen, extra_prune=extra)
-                elif extra is not None and bool(extra.any()):
-                    g.prune(~extra, self.optimizer)
-                    self.stats.keep(~extra)
-                    info = {"pruned": int(extra.sum())}
-                if d.enabled and d.opacity_reset and it < sched.densify_stop and it % sched.opacity_reset_interval == 0:
-                    reset_opacity(g, self.optimizer)
-                if len(g) == 0:
-                    raise TrainingError(f"{self.method.name}: every Gaussian was pruned at iteration {it} "
-                                        f"({info}); nothing is left to render")
+                info = self._adapt_density(it, renders)
                 self.optimizer.step()
                 self.optimizer.zero_grad(set_to_none=True)
             self.wall_s += time.perf_counter() - t0
             self.iteration = it
-            row = {"iteration": it, "wall_s": round(self.wall_s, 3), "loss": round(loss_value, 6),
-                   "n_gaussians": len(g)}
-            do_eval = it in snaps or (cfg.eval_every and it % cfg.eval_every == 0)
-            if do_eval:
-                self.model.meta.iteration = it
-                row["test_psnr"] = round(self.evaluate(), 3)
-                if it in snaps:
-                    self.model.save(self.out / "snapshots" / f"iter_{it:06d}.pt")
-                    row["snapshot"] = f"snapshots/iter_{it:06d}.pt"
-            if info:
-                row["densify"] = info
-            if do_eval or info or it % 10 == 0 or it == 1:
-                self.log.append(row)
+            row = self._record(it, loss_value, info, snaps)
             bar.update(1)
-            bar.set_postfix(loss=f"{loss_value:.4f}", n=len(g),
+            bar.set_postfix(loss=f"{loss_value:.4f}", n=len(self.model),
                             **({"psnr": row["test_psnr"]} if "test_psnr" in row else {}))
-            if it % cfg.checkpoint_every == 0 and it < cfg.iterations:
+            if it % self.tcfg.checkpoint_every == 0 and it < self.tcfg.iterations:
                 self._save_checkpoint()
             if self.on_iteration is not None:
                 self.on_iteration(self, it)

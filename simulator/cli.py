@@ -7,7 +7,7 @@ import json
 import re
 from pathlib import Path
 
-from e4dgs.argtypes import positive_float, positive_int
+from common.argtypes import positive_float, positive_int
 
 IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 
@@ -86,10 +86,10 @@ def job_fingerprint(config_yaml: str, seed: int, files: list[Path], t_us: list[i
 
 
 def run_simulate(args: argparse.Namespace) -> int:
-    from e4dgs.config import ConfigError, dump_config, load_config
-    from e4dgs.imageio import ImageReadError, read_linear_image
+    from common.config import ConfigError, dump_config, load_config
+    from common.imageio import ImageReadError, read_linear_image
     from simulator.config import SimulatorConfig
-    from e4dgs.fileio import output_lock
+    from common.fileio import output_lock
     from simulator.h5io import simulator_attrs
 
     try:
@@ -121,8 +121,8 @@ def _simulate_locked(args, config, files, t_us, first, attrs, fingerprint: str) 
     a later run resumes from (a spool with no checkpoint is removed)."""
     from tqdm import tqdm
 
-    from e4dgs.checkpoint import JobCheckpoint
-    from e4dgs.imageio import ImageReadError, read_linear_image
+    from common.checkpoint import JobCheckpoint
+    from common.imageio import ImageReadError, read_linear_image
     from simulator.resumable import EventSpool, SpoolResumeError
     from simulator.simulator import EventSimulator, FrameError
 
@@ -179,7 +179,7 @@ def add_view_parser(sub) -> None:
 
 def run_view(args: argparse.Namespace) -> int:
     from simulator.h5io import EventFileError, read_info, read_window, validate_event_file
-    from e4dgs.imageio import write_png
+    from common.imageio import write_png
     from simulator.view import event_frame, parse_time_us, save_video
 
     try:

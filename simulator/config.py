@@ -6,7 +6,7 @@ import warnings
 from dataclasses import dataclass
 from typing import Literal
 
-from e4dgs.config import ConfigError, ConfigWarning
+from common.config import ConfigError, ConfigWarning
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from e4dgs.fileio import atomic_output
+from common.fileio import atomic_output
 from simulator.events import EventStream, make_events, validate_events
 
 TONIC_DTYPE = np.dtype([("x", "<i8"), ("y", "<i8"), ("t", "<i8"), ("p", "?")])

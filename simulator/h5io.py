@@ -23,8 +23,8 @@ from typing import Any, Mapping
 import h5py
 import numpy as np
 
-from e4dgs.fileio import remove_stale_temps, temp_path_for
-from e4dgs.config import dump_config, to_dict
+from common.fileio import remove_stale_temps, temp_path_for
+from common.config import dump_config, to_dict
 from simulator.event_check import EventContentError, check_chunk, check_event_datasets, check_structure
 from simulator.events import EVENT_DTYPE, EventStream, validate_events
 

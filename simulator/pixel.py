@@ -9,29 +9,12 @@ import math
 
 import numpy as np
 
-REC709_LUMA = (0.2126, 0.7152, 0.0722)
+from common.color import REC709_LUMA, linear_to_srgb, rec709_luma, srgb_to_linear  # noqa: F401 (re-exported)
+
 # v2e maps 8-bit DN to the photoreceptor bandwidth scale as (DN + 20) / 275.
 _INTEN_OFFSET_DN, _INTEN_SCALE_DN = 20.0, 275.0
 # v2e: shot-noise rate at full white is this fraction of the rate in the dark.
 SHOT_NOISE_WHITE_FACTOR = 0.25
-
-
-def rec709_luma(rgb: np.ndarray) -> np.ndarray:
-    """Linear RGB [H,W,3] -> linear luminance [H,W] (Rec.709 / sRGB primaries)."""
-    r, g, b = REC709_LUMA
-    return r * rgb[..., 0] + g * rgb[..., 1] + b * rgb[..., 2]
-
-
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """sRGB-encoded values in [0,1] -> linear light (IEC 61966-2-1)."""
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(v: np.ndarray) -> np.ndarray:
-    """Linear light -> sRGB-encoded values, clipped to [0,1]."""
-    v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
-    return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
 
 
 def log_response(intensity: np.ndarray, eps: float, out: np.ndarray | None = None) -> np.ndarray:

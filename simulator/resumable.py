@@ -3,7 +3,7 @@
 HDF5 files are not safe to reopen after a process was killed mid-write, so a long job appends its
 events to a raw spool file (`.<name>.spool`, EVENT_DTYPE records). At its checkpoints the job calls
 `sync()`, which makes the spool durable and returns its event count, and stores that count in its
-own checkpoint (`e4dgs.checkpoint.JobCheckpoint`, together with e.g. the simulator state). After a
+own checkpoint (`common.checkpoint.JobCheckpoint`, together with e.g. the simulator state). After a
 kill, the job reopens the spool with `resume_count` = that count: the spool is truncated to it and
 the job continues. `finish` converts the spool into the final HDF5 file (temporary name, then
 rename) and deletes the spool. The final file appears only when complete, and a resumed run

@@ -17,7 +17,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from e4dgs.config import to_dict
+from common.config import to_dict
 from simulator import pixel
 from simulator.config import SimulatorConfig
 from simulator.events import EventStream, empty_events

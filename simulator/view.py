@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from e4dgs.fileio import atomic_output
+from common.fileio import atomic_output
 from simulator.events import EventStream
 
 ON_RGB = np.array([220, 40, 40], np.float64)    # red

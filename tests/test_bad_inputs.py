@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from e4dgs.cli import main
-from e4dgs.imageio import write_exr
+from common.imageio import write_exr
 from simulator import SimulatorConfig, simulate
 from simulator.h5io import write_events
 from tests.test_cli import grating_frames
@@ -297,7 +297,7 @@ def test_full_disk_during_simulate_leaves_nothing(frames_dir, tmp_path, capsys, 
 
 
 def test_a_second_simulate_into_the_same_output_is_refused(frames_dir, tmp_path, capsys):
-    from e4dgs.fileio import output_lock
+    from common.fileio import output_lock
 
     out = tmp_path / "ev.h5"
     with output_lock(out):
@@ -310,7 +310,7 @@ def test_a_second_simulate_into_the_same_output_is_refused(frames_dir, tmp_path,
 
 
 def test_unresumable_checkpoint_and_stale_temporaries_are_cleared(frames_dir, tmp_path, capsys, monkeypatch):
-    from e4dgs import imageio
+    from common import imageio
 
     out = tmp_path / "ev.h5"
     real_read, calls = imageio.read_linear_image, []
@@ -464,7 +464,7 @@ def test_a_typo_in_a_preset_override_is_blamed_on_the_preset(tmp_path, capsys, m
 
 
 def test_a_second_training_into_the_same_folder_is_refused(motion_scene, tmp_path, capsys):
-    from e4dgs.fileio import output_lock
+    from common.fileio import output_lock
 
     out = tmp_path / "run"
     with output_lock(out):

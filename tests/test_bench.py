@@ -8,10 +8,10 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from benchmark.config import MAIN_CELLS, BenchConfig, CellSpec, jobs, load_bench
-from benchmark.metrics.image import psnr, score_pairs, ssim
+from common.metrics.image import psnr, score_pairs, ssim
 from benchmark.report import write_report
 from benchmark.runner import read_results, run_bench
-from e4dgs.config import ConfigError, build_config
+from common.config import ConfigError, build_config
 
 
 # ---------------------------------------------------------------- metrics
@@ -246,3 +246,20 @@ def test_bench_train_breakdown_times_every_part_inside_an_iteration():
     finally:
         restore()
     assert DeformationField.forward is original
+
+
+def test_a_bad_override_is_refused_before_any_job_runs(motion_scene, tmp_path):
+    cfg = _tiny_bench(motion_scene)
+    cells = dict(cfg.cells)
+    cells["e4dgs"] = CellSpec("e4dgs", overrides={**TINY_TRAIN, "events.lamda_tv": 0.1})   # typo, in a later cell
+    cfg = build_config(BenchConfig, {**{k: getattr(cfg, k) for k in ("dataset", "scenes", "lpips_net")},
+                                     "cells": cells})
+    with pytest.raises(ConfigError, match="bench job main/.*/e4dgs .*events.lamda_tv: unknown key"):
+        run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "out", progress=False, log=lambda s: None)
+    assert not (tmp_path / "out").exists()                  # nothing trained, nothing written
+
+
+def test_the_blur_study_sets_the_level_through_each_methods_own_field(motion_scene):
+    blur = {j.cell: j.overrides for j in jobs(_tiny_bench(motion_scene)) if j.study == "blur" and j.variant == "mild"}
+    assert blur["d3dgs_blur"]["frames"] == "mild" and blur["deblur_d3dgs"]["frames"] == "mild"
+    assert "e4dgs" not in blur                                # events only: one run stands for every level

@@ -9,7 +9,7 @@ from datagen.blur_geometry import (LogHistogram, candidate_windows, choose_expos
                                    project_tracks, track_world, window_path_px)
 from datagen.cameras import axis_rotations, intrinsics_from_fov, look_at_opencv
 from datagen.config import BlurConfig
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 
 FPS = 3000.0
 K = intrinsics_from_fov(346, 260, 50.0).K

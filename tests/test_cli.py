@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from e4dgs.cli import main
-from e4dgs.imageio import write_exr
+from common.imageio import write_exr
 from simulator import SimulatorConfig, simulate
 from simulator.h5io import read_events, read_info
 from simulator.pixel import srgb_to_linear
@@ -110,7 +110,7 @@ def test_console_entry_point_is_installed():
 @contextlib.contextmanager
 def killed_at_frame_read(monkeypatch, n):
     """Interrupt the run (as a kill would) when it reads its n-th frame file."""
-    from e4dgs import imageio
+    from common import imageio
 
     real_read, calls = imageio.read_linear_image, []
 

@@ -3,7 +3,7 @@ from typing import Literal, Optional
 
 import pytest
 
-from e4dgs.config import ConfigError, dump_config, from_dict, load_config, replace_checked
+from common.config import ConfigError, dump_config, from_dict, load_config, replace_checked
 from simulator import SimulatorConfig
 
 

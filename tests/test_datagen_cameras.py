@@ -8,7 +8,7 @@ from datagen.cameras import (FLIP_YZ, blender_to_opencv, interpolate_pose, intri
                              opencv_to_blender, project, quat_to_rotmat, rig_poses, rotmat_to_quat, slerp,
                              spiral_positions)
 from datagen.config import CameraRigConfig
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 
 
 def rot_z(deg):

@@ -4,7 +4,7 @@ import pytest
 
 from datagen.blur import BlurStack, exposure_window
 from datagen.config import SCENE_NAMES, load_preset, resolve_scene
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 
 
 def test_every_scene_yaml_loads_with_every_preset():

@@ -14,7 +14,7 @@ import pytest
 
 from datagen.cameras import load_cameras, project
 from datagen.config import SCENE_NAMES, load_preset, resolve_scene
-from e4dgs.imageio import read_exr, read_png_linear
+from common.imageio import read_exr, read_png_linear
 from simulator.events import validate_events
 from simulator.h5io import read_events, read_info
 from simulator.pixel import linear_to_srgb

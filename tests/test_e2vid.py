@@ -373,7 +373,7 @@ def test_e2vid_d3dgs_end_to_end_on_the_tiny_dataset(motion_scene, tmp_path):
         "train.iterations": 30, "train.scale_schedule": False, "train.warm_up": 200, "train.densify.enabled": False,
         "train.init.n_points_object": 500}, out_dir=tmp_path / "run", progress=False)
     assert model.meta.iteration == 30 and model.meta.channels == 1
-    method = E2VIDD3DGS.for_evaluation(ds, recon.resolve_config("e2vid_d3dgs"))
+    method = E2VIDD3DGS.scorer(ds, recon.resolve_config("e2vid_d3dgs"))
     pairs = method.eval_pairs(model, ds.frames("test")[:3])
     assert all(p.shape == g.shape == (48, 64, 1) and np.isfinite(p).all() for p, g in pairs)
 
@@ -411,6 +411,6 @@ def test_weights_report_lists_the_curve_and_heldout_numbers():
 @pytest.mark.parametrize("key,value", [("tbptt", 0), ("iterations", 0), ("data_workers", -1), ("lpips_start", -5)])
 def test_train_config_rejects_bad_values_naming_the_field(key, value):
     from e2vid.train import E2VIDTrainConfig
-    from e4dgs.config import ConfigError, build_config
+    from common.config import ConfigError, build_config
     with pytest.raises(ConfigError, match=key):
         build_config(E2VIDTrainConfig, None, {key: value})

@@ -5,7 +5,7 @@ import types
 import pytest
 import torch
 
-from benchmark.metrics.lpips import (LPIPS, backbone_state_from_jax, build_features, default_backbone_path,
+from common.metrics.lpips import (LPIPS, backbone_state_from_jax, build_features, default_backbone_path,
                                      lpips_distance)
 
 

@@ -12,7 +12,7 @@ import recon
 import recon.device
 import recon.raster
 from datagen.dataset import SceneDataset
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 from recon.device import DeviceError, run_placement, to_device
 from recon.raster import Camera, render
 from recon.trainer import Trainer

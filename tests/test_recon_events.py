@@ -9,7 +9,7 @@ import torch
 import recon
 from datagen.dataset import SceneDataset
 from recon import events as ev
-from recon.color import correct_colors, fit_gain_offset
+from common.color_correction import correct_colors, fit_gain_offset
 from recon.event_windows import EventSource
 from recon.methods.e4dgs import E4DGS, PAPER_PIXELS
 from simulator.h5io import read_events

@@ -11,7 +11,7 @@ import torch
 
 import recon
 from datagen.dataset import SceneDataset
-from e4dgs.config import ConfigError
+from common.config import ConfigError
 from recon.evaluate import evaluate_psnr
 from recon.methods.d3dgs import D3DGS
 from recon.render import camera_from_pose

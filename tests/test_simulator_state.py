@@ -4,7 +4,7 @@ import pytest
 
 from simulator import EventSimulator, SimulatorConfig
 from simulator.h5io import read_events
-from e4dgs.checkpoint import JobCheckpoint
+from common.checkpoint import JobCheckpoint
 from simulator.resumable import EventSpool
 
 NOISY = SimulatorConfig(threshold_sigma=0.04, lowpass_cutoff_hz=400.0, refractory_us=60, leak_rate_hz=40.0,

@@ -17,7 +17,7 @@ from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
 from recon.raster import Camera
-from recon.trainer import Method
+from recon.method import Method
 from recon.views import load_frame, record_camera
 
 
@@ -32,6 +32,7 @@ class TrainView:
 class D3DGS(Method):
     name = "d3dgs"
     config_cls = D3DGSConfig
+    blur_level_field = "frames"
 
     def __init__(self, dataset: SceneDataset, cfg: D3DGSConfig):
         super().__init__(dataset, cfg)
@@ -39,8 +40,9 @@ class D3DGS(Method):
         if not self.views:
             raise DatasetError(f"{dataset.dir}: no training frames for frames={cfg.frames!r}")
 
-    def channels(self) -> int:
-        return self.cfg.channels
+    @classmethod
+    def channels_of(cls, cfg: D3DGSConfig) -> int:
+        return cfg.channels
 
     def to_device(self, device: torch.device) -> None:
         self.views = to_device(self.views, device)

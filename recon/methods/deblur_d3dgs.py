@@ -21,7 +21,7 @@ from recon.config import DeblurD3DGSConfig
 from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
-from recon.trainer import Method
+from recon.method import Method
 from recon.views import blur_views
 
 
@@ -36,6 +36,7 @@ def lowres_l1(render: torch.Tensor, target: torch.Tensor, factor: int) -> torch.
 class DeblurD3DGS(Method):
     name = "deblur_d3dgs"
     config_cls = DeblurD3DGSConfig
+    blur_level_field = "frames"
 
     def __init__(self, dataset: SceneDataset, cfg: DeblurD3DGSConfig):
         super().__init__(dataset, cfg)
@@ -43,7 +44,8 @@ class DeblurD3DGS(Method):
         if not self.views:
             raise DatasetError(f"{dataset.dir}: no blurred training frames at level {cfg.frames!r}")
 
-    def channels(self) -> int:
+    @classmethod
+    def channels_of(cls, cfg: DeblurD3DGSConfig) -> int:
         return 3
 
     def to_device(self, device: torch.device) -> None:

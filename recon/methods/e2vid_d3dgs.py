@@ -16,7 +16,7 @@ from e2vid.networks import Reconstructor
 from e2vid.official import load_checkpoint
 from e2vid.reconstruct import reconstruct_frames
 from e2vid.weights import default_weights_path
-from recon.color import correct_colors
+from common.color_correction import correct_colors
 from recon.config import E2VIDD3DGSConfig
 from recon.methods import register
 from recon.methods.d3dgs import D3DGS, TrainView
@@ -38,8 +38,10 @@ def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, net
 class E2VIDD3DGS(D3DGS):
     name = "e2vid_d3dgs"
     config_cls = E2VIDD3DGSConfig
+    blur_level_field = None        # trains on frames reconstructed from events: blur cannot change it
 
-    def channels(self) -> int:
+    @classmethod
+    def channels_of(cls, cfg: E2VIDD3DGSConfig) -> int:
         return 1
 
     def training_records(self):
@@ -58,5 +60,6 @@ class E2VIDD3DGS(D3DGS):
                           for r, f in zip(recs, frames)]
         return views
 
-    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-        return correct_colors(pred, gt)[0] if self.cfg.color_correct else pred
+    @classmethod
+    def correction(cls, cfg: E2VIDD3DGSConfig):
+        return (lambda pred, gt: correct_colors(pred, gt)[0]) if cfg.color_correct else None

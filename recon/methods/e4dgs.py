@@ -16,7 +16,7 @@ read from the event files), so L_hat is the quantity the events measure. Each st
 
 IIP prunes by importance (the rasterizer's max alpha x transmittance over the training cameras at
 `iip_times` timestamps); there is no opacity reset. Test views are scored after per-image colour
-correction on log intensity (recon.color).
+correction on log intensity (common.color_correction).
 """
 from __future__ import annotations
 
@@ -27,18 +27,28 @@ from torch import nn
 
 from datagen.dataset import SceneDataset
 from recon import events as ev
-from recon.color import correct_colors
+from common.color_correction import correct_colors
 from recon.config import E4DGSConfig
 from recon.event_windows import EventSource, WindowSampler
 from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
 from recon.model import DynamicGaussians
-from recon.raster import Camera
-from recon.trainer import Method
+from recon.method import Method
 from recon.views import BlurView, blur_views, dataset_camera
 
 PAPER_PIXELS = 346 * 260
+
+
+def importance(model: DynamicGaussians, dataset: SceneDataset, n_times: int, backend: str = "auto") -> torch.Tensor:
+    """IIP's w_i [N]: max over the dataset's cameras x n_times timestamps of the Gaussian's largest
+    alpha x transmittance on any pixel (on the model's device, rendered with `backend`)."""
+    w = torch.zeros(len(model), device=model.device)
+    for k in range(dataset.n_cameras):
+        for t in np.linspace(0.0, 1.0, n_times):
+            out = model.render_output(dataset_camera(dataset, k, int(round(t * dataset.duration_us))), float(t), backend)
+            w = torch.maximum(w, out.max_weight.detach())
+    return w
 
 
 @register
@@ -57,10 +67,10 @@ class E4DGS(Method):
         src = self.sampler.sources[0]
         self.c_pos, self.c_neg = src.thresholds()
         self.c_ref = 0.5 * (self.c_pos + self.c_neg)
-        info = src.info
-        self.response = {"mode": str(info.get("sim_log_mode", "log")), "eps": float(info.get("sim_log_eps", 1e-3)),
-                         "linlog_threshold_dn": float(info.get("sim_linlog_threshold_dn", 20.0)),
-                         "dn_per_unit": float(info.get("sim_linlog_dn_per_unit", 255.0))}
+        sensor = src.sensor   # the SimulatorConfig stored with the events: the response L_hat must match
+        self.response = {"mode": sensor.log_mode, "eps": float(sensor.log_eps),
+                         "linlog_threshold_dn": float(sensor.linlog_threshold_dn),
+                         "dn_per_unit": float(sensor.linlog_dn_per_unit)}
         if e.views_per_step > dataset.n_cameras:
             raise ValueError(f"events.views_per_step: {e.views_per_step} cameras asked for, the dataset "
                              f"{dataset.dir} has {dataset.n_cameras}")
@@ -92,8 +102,9 @@ class E4DGS(Method):
     def c_hat(self) -> torch.Tensor:
         return torch.exp(self.log_c)
 
-    def channels(self) -> int:
-        return 3 if self.uses_rgb else 1
+    @classmethod
+    def channels_of(cls, cfg: E4DGSConfig) -> int:
+        return 3 if cls.uses_rgb else 1
 
     def setup_model(self, model: DynamicGaussians) -> None:
         if self.cfg.events.inherit_deformation:
@@ -166,16 +177,7 @@ class E4DGS(Method):
 
     # -- intensity importance pruning -----------------------------------------------------------
     def importance(self, model: DynamicGaussians, backend: str = "auto") -> torch.Tensor:
-        """w_i = max over the training cameras x iip_times timestamps of the Gaussian's largest
-        alpha x transmittance on any pixel [N] (on the model's device, rendered with `backend`)."""
-        w = torch.zeros(len(model), device=model.device)
-        ds = self.dataset
-        for k in range(ds.n_cameras):
-            for t in np.linspace(0.0, 1.0, self.cfg.events.iip_times):
-                out = model.render_output(dataset_camera(self.dataset, k, int(round(t * ds.duration_us))), float(t),
-                                          backend)
-                w = torch.maximum(w, out.max_weight.detach())
-        return w
+        return importance(model, self.dataset, self.cfg.events.iip_times, backend)
 
     def prune_mask(self, trainer, iteration: int):
         e = self.cfg.events
@@ -185,11 +187,13 @@ class E4DGS(Method):
         return self.importance(trainer.model, trainer.backend) < e.iip_threshold
 
     # -- evaluation -----------------------------------------------------------------------------
-    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-        return correct_colors(pred, gt)[0]
+    @classmethod
+    def correction(cls, cfg: E4DGSConfig):
+        return lambda pred, gt: correct_colors(pred, gt)[0]
 
 
 @register
 class E4DGSRGB(E4DGS):
     name = "e4dgs_rgb"
     uses_rgb = True
+    blur_level_field = "rgb_frames"

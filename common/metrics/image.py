@@ -12,7 +12,7 @@ from typing import Iterable
 import numpy as np
 from skimage.metrics import structural_similarity
 
-from e4dgs.metrics import psnr
+from common.metrics import psnr
 
 
 def ssim(pred: np.ndarray, ref: np.ndarray) -> float:
@@ -37,7 +37,7 @@ def score_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str |
            "ssim": float(np.mean([ssim(p, r) for p, r in pairs])),
            "n_images": len(pairs)}
     if lpips_net:
-        from benchmark.metrics.lpips import lpips_distance
+        from common.metrics.lpips import lpips_distance
         out["lpips"] = float(np.mean([lpips_distance(p, r, lpips_net) for p, r in pairs]))
     assert all(math.isfinite(v) for v in out.values())
     return out

@@ -161,9 +161,8 @@ def to_dict(obj: Any) -> Any:
     return obj
 
 
-def load_config(cls: type[T], path: str | os.PathLike, overrides: Mapping[str, Any] | None = None) -> T:
-    """Load `cls` from the YAML file at `path` (strict); `overrides` are applied on top of it."""
-    path = Path(path)
+def read_yaml_mapping(path: Path) -> dict:
+    """The mapping at the top of a YAML file (empty file: {}); ConfigError naming the file otherwise."""
     try:
         text = path.read_text()
     except OSError as exc:
@@ -171,12 +170,18 @@ def load_config(cls: type[T], path: str | os.PathLike, overrides: Mapping[str, A
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
     if data is None:
-        data = {}
+        return {}
     if not isinstance(data, Mapping):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
-    data = dict(data)
+    return dict(data)
+
+
+def load_config(cls: type[T], path: str | os.PathLike, overrides: Mapping[str, Any] | None = None) -> T:
+    """Load `cls` from the YAML file at `path` (strict); `overrides` are applied on top of it."""
+    path = Path(path)
+    data = read_yaml_mapping(path)
     data.update(overrides or {})
     try:
         return from_dict(cls, data)
@@ -234,14 +239,7 @@ def build_config(cls: type[T], config: Any = None, overrides: Mapping[str, Any] 
         data: dict = {}
     elif isinstance(config, (str, Path)):
         source = str(config)
-        try:
-            data = yaml.safe_load(Path(config).read_text()) or {}
-        except OSError as exc:
-            raise ConfigError(f"{config}: cannot read config file ({exc.strerror})") from None
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{config}: not valid YAML: {' '.join(str(exc).split())}") from None
-        if not isinstance(data, dict):
-            raise ConfigError(f"{config}: expected a mapping at the top level")
+        data = read_yaml_mapping(Path(config))
     elif isinstance(config, Mapping):
         data = dict(config)
     elif isinstance(config, cls):

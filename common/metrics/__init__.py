@@ -1,4 +1,4 @@
-"""Image metrics shared by every layer (the benchmark's full set, SSIM and LPIPS, is benchmark/metrics)."""
+"""Image metrics shared by every layer: PSNR here; SSIM and the full score set in `image`, LPIPS (offline weights) in `lpips`."""
 from __future__ import annotations
 
 import math

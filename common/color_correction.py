@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simulator.pixel import linear_to_srgb, srgb_to_linear
+from common.color import linear_to_srgb, srgb_to_linear
 
 LOG_EPS = 1e-3
 _MIN_VAR = 1e-12

@@ -7,7 +7,7 @@ the scene's own sensor config, and reports events per second of simulated time, 
 and for a frozen one (scene and camera held at the middle of the clip, where an ideal renderer
 gives no events at all), next to the render time per view.
 
-    python -m benchmark.bench_engines [--scene cubes] [--frames 90]
+    python -m datagen.bench_engines [--scene cubes] [--frames 90]
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from datagen.config import load_preset, resolve_scene
 from datagen.render import render_clip
-from e4dgs.config import replace_checked
+from common.config import replace_checked
 from simulator.pixel import rec709_luma
 from simulator.simulator import simulate
 

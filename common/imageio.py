@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from e4dgs.fileio import atomic_output
+from common.fileio import atomic_output
 
 _SINGLE_CHANNEL_NAMES = ("V", "Y", "L", "Z", "A")
 
@@ -62,7 +62,7 @@ def read_png_linear(path: str | os.PathLike) -> np.ndarray:
     """8- or 16-bit PNG (or other cv2-readable integer image), treated as sRGB and linearised."""
     import cv2
 
-    from simulator.pixel import srgb_to_linear
+    from common.color import srgb_to_linear
 
     path = Path(path)
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -94,7 +94,7 @@ def write_png(path: str | os.PathLike, image: np.ndarray) -> Path:
 
 def write_png_srgb(path: str | os.PathLike, linear: np.ndarray) -> Path:
     """Linear [H,W] or [H,W,3] image -> 8-bit sRGB PNG (atomic)."""
-    from simulator.pixel import linear_to_srgb
+    from common.color import linear_to_srgb
 
     return write_png(path, np.round(linear_to_srgb(linear) * 255.0).astype(np.uint8))
 

@@ -7,7 +7,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from e4dgs.fileio import atomic_output
+from common.fileio import atomic_output
 
 _FINGERPRINT = "checkpoint__fingerprint"
 

@@ -1,0 +1,73 @@
+"""The hooks a reconstruction method implements for the shared trainer (recon.trainer.Trainer) and
+the class-level half that scoring needs (recon.scoring.Scorer): subclass `Method` and `@register` it."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+import torch
+
+from datagen.dataset import SceneDataset
+from recon.model import DynamicGaussians
+from recon.scoring import Scorer
+
+if TYPE_CHECKING:
+    from recon.trainer import Trainer
+
+
+class Method:
+    """Hooks a method implements (subclass it and `@register` it)."""
+    name = ""
+    config_cls: type = object
+    blur_level_field: str | None = None   # the config field that picks the RGB blur level it trains on (None: none)
+
+    def __init__(self, dataset: SceneDataset, cfg: Any):
+        self.dataset, self.cfg = dataset, cfg
+
+    # -- scoring (class level: needs the config, not the training data) ---------------------------
+    @classmethod
+    def channels_of(cls, cfg: Any) -> int:
+        """Channels the method's model predicts under `cfg`."""
+        raise NotImplementedError
+
+    @classmethod
+    def correction(cls, cfg: Any) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """What is applied to a prediction before it is scored (None: nothing; E-4DGS: colour correction)."""
+        return None
+
+    @classmethod
+    def scorer(cls, dataset: SceneDataset, cfg: Any) -> Scorer:
+        """The method's evaluation on `dataset`, without loading or reconstructing training data."""
+        return Scorer(dataset, cls.channels_of(cfg), cls.correction(cfg))
+
+    def channels(self) -> int:
+        return type(self).channels_of(self.cfg)
+
+    def setup_model(self, model: DynamicGaussians) -> None:
+        """Adjust a freshly initialised model (e.g. give it deformation anchors)."""
+
+    def to_device(self, device: torch.device) -> None:
+        """Move the method's training data (targets, cameras) and parameters to the run's device
+        (called once, before the optimizer is built)."""
+
+    def extra_parameters(self) -> list[dict]:
+        """Additional Adam groups (dicts with params, lr, name)."""
+        return []
+
+    def step(self, trainer: "Trainer", iteration: int):
+        """Loss of one iteration -> (loss tensor, [(RenderOutput, Camera)] whose means2d kept their grad)."""
+        raise NotImplementedError
+
+    def prune_mask(self, trainer: "Trainer", iteration: int) -> torch.Tensor | None:
+        """Gaussians to prune at this iteration (bool [N]) or None (called every iteration, after backward)."""
+        return None
+
+    def eval_pairs(self, model: DynamicGaussians, records, backend: str = "auto") -> list[tuple[np.ndarray, np.ndarray]]:
+        """(prediction, ground truth) pairs of held-out records (see recon.scoring.Scorer)."""
+        return type(self).scorer(self.dataset, self.cfg).eval_pairs(model, records, backend)
+
+    def state_dict(self) -> dict:
+        return {}
+
+    def load_state_dict(self, state: dict) -> None:
+        pass

@@ -1,0 +1,40 @@
+"""What evaluating a method needs, apart from training it: held-out views rendered from a model,
+their ground truth in the method's channels, and the method's correction before scoring.
+
+    scorer = recon.get_method("e4dgs").scorer(dataset, cfg)   # no training data loaded
+    pairs = scorer.eval_pairs(model, dataset.frames("test"))  # [(prediction, ground truth)] in [0, 1]
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from datagen.dataset import SceneDataset
+from recon.model import DynamicGaussians
+from recon.views import load_frame, record_camera
+
+
+class Scorer:
+    def __init__(self, dataset: SceneDataset, channels: int,
+                 correct: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None):
+        self.dataset = dataset
+        self.n_channels = channels
+        self._correct = correct
+
+    def channels(self) -> int:
+        return self.n_channels
+
+    def correct(self, pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+        """What is applied to a prediction before it is scored (identity unless the method has one)."""
+        return pred if self._correct is None else self._correct(pred, gt)
+
+    def eval_pairs(self, model: DynamicGaussians, records, backend: str = "auto") -> list[tuple[np.ndarray, np.ndarray]]:
+        """(prediction, ground truth) images [H, W, C] in [0, 1] on the CPU for held-out records,
+        rendered on the model's device with `backend`."""
+        pairs = []
+        for rec in records:
+            gt = load_frame(self.dataset, rec, self.n_channels)
+            pred = model.render_numpy(record_camera(self.dataset, rec), rec.time, backend)
+            pairs.append((self.correct(pred, gt), gt))
+        return pairs

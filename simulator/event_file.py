@@ -1,0 +1,71 @@
+"""The typed boundary to an event file: consumers (training, E2VID, views) read events through
+`EventFile` and never open the HDF5 layout themselves.
+
+    ev = EventFile("data/quick/lego/events/cam0.h5")      # validated once (simulator.event_check)
+    ev.n, ev.width, ev.height, ev.t_offset_us
+    ev.sensor                       # the SimulatorConfig that made the file (typed, range-checked)
+    t = ev.times(i0, i1)            # [i1 - i0] int64 absolute microseconds
+    x, y, p = ev.rows(i0, i1)       # uint16, uint16, int8 in {-1, +1}
+    i0, i1 = ev.indices(t0, t1)     # index range of events with t0 <= t < t1 (through ms_to_idx)
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+
+import h5py
+import numpy as np
+import yaml
+
+from common.config import ConfigError, from_dict
+from simulator.config import SimulatorConfig
+from simulator.h5io import EventFileError, read_info, validate_event_file, window_indices
+
+
+class EventFile:
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        validate_event_file(self.path)
+        self.info = read_info(self.path)
+        self.n = int(self.info["n_events"])
+        self.width, self.height = int(self.info["width"]), int(self.info["height"])
+        self.t_offset_us = int(self.info["t_offset_us"])
+        self._f = h5py.File(self.path, "r")
+        self._g = self._f["events"]
+        self._sensor: SimulatorConfig | None = None
+
+    @property
+    def sensor(self) -> SimulatorConfig:
+        """The simulator config stored with the events: the YAML the writer saved, or else its
+        `sim_<name>` attributes (fields it lacks take SimulatorConfig's defaults)."""
+        if self._sensor is None:
+            try:
+                if "simulator_config" in self.info:
+                    data = yaml.safe_load(str(self.info["simulator_config"])) or {}
+                else:
+                    names = {f.name for f in dataclasses.fields(SimulatorConfig)}
+                    data = {k[4:]: v for k, v in self.info.items() if k.startswith("sim_") and k[4:] in names}
+                self._sensor = from_dict(SimulatorConfig, data)
+            except (ConfigError, yaml.YAMLError) as exc:
+                raise EventFileError(f"{self.path}: the stored simulator config is not valid ({exc})") from None
+        return self._sensor
+
+    def times(self, i0: int, i1: int) -> np.ndarray:
+        return self._g["t"][i0:i1].astype(np.int64) + self.t_offset_us
+
+    def rows(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        p = self._g["p"][i0:i1].astype(np.int8) * 2 - 1
+        return self._g["x"][i0:i1], self._g["y"][i0:i1], p
+
+    def indices(self, t0_us: int, t1_us: int) -> tuple[int, int]:
+        return window_indices(self._f, int(t0_us), int(t1_us))
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> "EventFile":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
