@@ -71,6 +71,7 @@ class SceneJob:
         self.intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
         self.poses = scene_poses(cfg, self.tau)  # [C, T, 4, 4] OpenCV c2w
         self.kept = np.arange(0, cfg.n_timestamps, cfg.frames.keep_every)
+        self._kept_index = {int(i): j for j, i in enumerate(self.kept)}   # timestamp -> kept frame number
         self.blur: BlurReport | None = None   # exposures chosen from the scene geometry (run() measures them)
         self.windows: dict[str, dict[int, tuple[int, int]]] = {}
         self.fingerprint = config_fingerprint(cfg)
@@ -81,7 +82,7 @@ class SceneJob:
         if not manifest.exists():
             return False
         if json.loads(manifest.read_text()).get("config_sha256") != self.fingerprint:
-            raise SystemExit(f"error: {self.dir} holds a complete scene generated with another config; "
+            raise ValueError(f"{self.dir} holds a complete scene generated with another config; "
                              "remove it or choose another --out")
         return True
 
@@ -93,6 +94,8 @@ class SceneJob:
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> Path:
+        """Generate the scene: measure the blur, then render, simulate and write every timestamp
+        (resuming a checkpoint), then finish the event files and the metadata."""
         cfg = self.cfg
         if self.is_complete():
             print(f"{self.dir}: complete, skipped")
@@ -104,58 +107,19 @@ class SceneJob:
         t_blur = time.perf_counter() - t_blur
         self.dir.mkdir(parents=True, exist_ok=True)
         renderer = R.ViewRenderer()
-        C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
         ckpt = JobCheckpoint(self.dir / ".generate.ckpt.npz", self.fingerprint)
-        state = ckpt.load() or {}
-        spool_names = [self.dir / "events" / f".cam{k}.h5.spool" for k in range(C)]
-        if state and any(not p.exists() or p.stat().st_size < int(state[f"n_events_{k}"]) * EVENT_DTYPE.itemsize
-                         for k, p in enumerate(spool_names)):
-            print(f"warning: {ckpt.path}: its event spools are missing or shorter than it records; starting "
-                  f"{cfg.name} over from the first timestamp", flush=True)
-            ckpt.remove()
-            state = {}
-        sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.seed * 1000 + k) for k in range(C)]
-        attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
-        spools = []
-        for k in range(C):
-            spools.append(EventSpool(self.dir / "events" / f"cam{k}.h5", W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
-                                     resume_count=int(state[f"n_events_{k}"]) if state else None))
-            if state:
-                sims[k].load_state_dict({key[len(f"sim{k}__"):]: v for key, v in state.items() if key.startswith(f"sim{k}__")})
-        stacks = {(level, k): BlurStack(self.windows[level]) for level in self.windows for k in range(C)}
-        for (level, k), stack in stacks.items():
-            stack.load_state(state, f"blur__{level}__{k}__")
+        state = self._resumable_state(ckpt)
+        sims, spools, stacks = self._open_streams(state)
         start = int(state.get("next_index", 0))
         if start:
             print(f"{cfg.name}: resuming at timestamp {start} of {cfg.n_timestamps}", flush=True)
         seconds = {name: float(state.get(f"seconds_{name}", 0.0)) for name in ("blur_geometry", "render", "simulate", "write", "total")}
         seconds["blur_geometry"] += t_blur
-        kept_set = {int(i): j for j, i in enumerate(self.kept)}
         bar = tqdm(range(start, cfg.n_timestamps), desc=cfg.name, unit="ts", initial=start, total=cfg.n_timestamps,
                    disable=not self.progress, dynamic_ncols=True, position=self.position)
         try:
             for i in bar:
-                t0 = time.perf_counter()
-                R.set_time(float(self.tau[i]))
-                R.set_noise_seed(cfg.seed * 100_003 + i)
-                frames = []
-                for k, cam in enumerate(cams):
-                    R.set_pose(cam, self.poses[k, i])
-                    frames.append(renderer.render(cam) * np.float32(cfg.lighting.exposure))
-                t1 = time.perf_counter()
-                for k in range(C):
-                    spools[k].append(sims[k].push(rec709_luma(frames[k]), int(self.t_us[i])))
-                t2 = time.perf_counter()
-                for k in range(C):
-                    if i in kept_set:
-                        self._write_kept(k, kept_set[i], frames[k])
-                    for level in self.windows:
-                        for j, mean in stacks[(level, k)].add(i, frames[k]):
-                            write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
-                t3 = time.perf_counter()
-                seconds["render"] += t1 - t0
-                seconds["simulate"] += t2 - t1
-                seconds["write"] += t3 - t2
+                self._timestamp(i, cams, renderer, sims, spools, stacks, seconds)
                 if self.progress and i % 10 == 0:
                     bar.set_postfix_str(" ".join(f"c{k}:{s.n_events / 1e3:.0f}k" for k, s in enumerate(spools)))
                 if (i + 1) % self.checkpoint_every == 0 and i + 1 < cfg.n_timestamps:
@@ -169,6 +133,61 @@ class SceneJob:
         self._write_metadata(seconds)
         ckpt.remove()
         return self.dir
+
+    def _resumable_state(self, ckpt: JobCheckpoint) -> dict:
+        """The checkpoint's state if its event spools hold what it records, else {} (start over, saying why)."""
+        state = ckpt.load() or {}
+        spool_names = [self.dir / "events" / f".cam{k}.h5.spool" for k in range(self.cfg.camera.n_cameras)]
+        if state and any(not p.exists() or p.stat().st_size < int(state[f"n_events_{k}"]) * EVENT_DTYPE.itemsize
+                         for k, p in enumerate(spool_names)):
+            print(f"warning: {ckpt.path}: its event spools are missing or shorter than it records; starting "
+                  f"{self.cfg.name} over from the first timestamp", flush=True)
+            ckpt.remove()
+            state = {}
+        return state
+
+    def _open_streams(self, state: dict):
+        """Per camera: the simulator, the event spool and the blur accumulators, restored from `state`."""
+        cfg = self.cfg
+        C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
+        sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.seed * 1000 + k) for k in range(C)]
+        attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
+        spools = []
+        for k in range(C):
+            spools.append(EventSpool(self.dir / "events" / f"cam{k}.h5", W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
+                                     resume_count=int(state[f"n_events_{k}"]) if state else None))
+            if state:
+                sims[k].load_state_dict({key[len(f"sim{k}__"):]: v for key, v in state.items() if key.startswith(f"sim{k}__")})
+        stacks = {(level, k): BlurStack(self.windows[level]) for level in self.windows for k in range(C)}
+        for (level, k), stack in stacks.items():
+            stack.load_state(state, f"blur__{level}__{k}__")
+        return sims, spools, stacks
+
+    def _timestamp(self, i: int, cams, renderer, sims, spools, stacks, seconds: dict) -> None:
+        """Render every camera at timestamp i, feed the simulators, write kept and blurred frames."""
+        cfg = self.cfg
+        t0 = time.perf_counter()
+        R.set_time(float(self.tau[i]))
+        R.set_noise_seed(cfg.seed * 100_003 + i)
+        frames = []
+        for k, cam in enumerate(cams):
+            R.set_pose(cam, self.poses[k, i])
+            frames.append(renderer.render(cam) * np.float32(cfg.lighting.exposure))
+        t1 = time.perf_counter()
+        for k in range(len(cams)):
+            spools[k].append(sims[k].push(rec709_luma(frames[k]), int(self.t_us[i])))
+        t2 = time.perf_counter()
+        kept_index = self._kept_index.get(i)
+        for k in range(len(cams)):
+            if kept_index is not None:
+                self._write_kept(k, kept_index, frames[k])
+            for level in self.windows:
+                for j, mean in stacks[(level, k)].add(i, frames[k]):
+                    write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
+        t3 = time.perf_counter()
+        seconds["render"] += t1 - t0
+        seconds["simulate"] += t2 - t1
+        seconds["write"] += t3 - t2
 
     def _measure_blur(self) -> None:
         """Pick every blur level's exposure from the scene geometry (datagen.blur_geometry)."""
