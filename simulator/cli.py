@@ -2,8 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import hashlib
-import json
 import re
 from pathlib import Path
 
@@ -75,22 +73,10 @@ def add_simulate_parser(sub) -> None:
     p.set_defaults(func=run_simulate)
 
 
-def job_fingerprint(config_yaml: str, seed: int, files: list[Path], t_us: list[int]) -> str:
-    """Identity of a simulate job: config, seed, frame files (name, size, mtime) and timestamps."""
-    h = hashlib.sha256()
-    h.update(json.dumps([config_yaml, seed, t_us]).encode())
-    for f in files:
-        st = f.stat()
-        h.update(f"{f.name}:{st.st_size}:{st.st_mtime_ns};".encode())
-    return h.hexdigest()
-
-
 def run_simulate(args: argparse.Namespace) -> int:
-    from common.config import ConfigError, dump_config, load_config
-    from common.imageio import ImageReadError, read_linear_image
+    from common.config import ConfigError, load_config
     from simulator.config import SimulatorConfig
-    from common.fileio import output_lock
-    from simulator.h5io import simulator_attrs
+    from simulator.files import simulate_files
 
     try:
         config = load_config(SimulatorConfig, args.config) if args.config else SimulatorConfig()
@@ -103,66 +89,11 @@ def run_simulate(args: argparse.Namespace) -> int:
         check_no_gaps(files)
         t_us = [args.t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
     try:
-        first = read_linear_image(files[0])
-    except ImageReadError as exc:
+        r = simulate_files(files, t_us, args.out, config, args.seed, args.checkpoint_every)
+    except ValueError as exc:    # a bad frame: one line naming it
         raise SystemExit(f"error: {exc}") from None
-    config_yaml = dump_config(config)
-    attrs = simulator_attrs(config)
-    attrs.update(seed=args.seed, source_frames=str(args.frames),
-                 n_frames=len(files))
-    with output_lock(args.out):
-        _simulate_locked(args, config, files, t_us, first, attrs, job_fingerprint(config_yaml, args.seed, files, t_us))
+    print(f"{args.out}: {r.n_events} events from {len(files)} frames ({r.width}x{r.height})")
     return 0
-
-
-def _simulate_locked(args, config, files, t_us, first, attrs, fingerprint: str) -> None:
-    """The simulation loop, run while holding the output's lock: resume from a valid checkpoint (or
-    start over, saying why, when its spool cannot be resumed), write, and on failure leave only what
-    a later run resumes from (a spool with no checkpoint is removed)."""
-    from tqdm import tqdm
-
-    from common.checkpoint import JobCheckpoint
-    from common.imageio import ImageReadError, read_linear_image
-    from simulator.resumable import EventSpool, SpoolResumeError
-    from simulator.simulator import EventSimulator, FrameError
-
-    height, width = first.shape[:2]
-    ckpt = JobCheckpoint(args.out.with_name(f".{args.out.name}.ckpt.npz"), fingerprint)
-    state = ckpt.load()
-    try:
-        spool = EventSpool(args.out, width, height, t_offset_us=t_us[0], attrs=attrs,
-                           resume_count=None if state is None else int(state["n_events"]))
-    except SpoolResumeError as exc:
-        print(f"warning: {exc}; starting {args.out} over from the first frame")
-        ckpt.remove()
-        state = None
-        spool = EventSpool(args.out, width, height, t_offset_us=t_us[0], attrs=attrs)
-    sim = EventSimulator(config, width, height, seed=args.seed)
-    start = 0
-    if state is not None:
-        sim.load_state_dict(state)
-        start = int(state["next_frame"])
-        print(f"resuming {args.out} at frame {start} of {len(files)} ({spool.n_events} events kept)")
-    checkpointed = state is not None
-    done = False
-    try:
-        for k in tqdm(range(start, len(files)), desc="simulate", unit="frame", initial=start, total=len(files)):
-            try:
-                frame = first if k == 0 else read_linear_image(files[k])
-                spool.append(sim.push(frame, t_us[k]))
-            except (FrameError, ImageReadError) as exc:
-                raise SystemExit(f"error: {files[k]}: {exc}") from None
-            if (k + 1) % args.checkpoint_every == 0 and k + 1 < len(files):
-                ckpt.save({**sim.state_dict(), "next_frame": k + 1, "n_events": spool.sync()})
-                checkpointed = True
-        spool.finish(t_end_us=t_us[-1])
-        ckpt.remove()
-        done = True
-    finally:
-        spool.close()
-        if not done and not checkpointed:   # nothing a later run could resume from
-            spool.spool_path.unlink(missing_ok=True)
-    print(f"{args.out}: {spool.n_events} events from {len(files)} frames ({width}x{height})")
 
 
 def add_view_parser(sub) -> None:

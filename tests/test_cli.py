@@ -151,3 +151,18 @@ def test_changed_inputs_discard_a_stale_checkpoint(exr_dir, tmp_path, monkeypatc
     main(["simulate", "--frames", str(exr_dir), "--fps", "1000", "--out", str(out)])  # other timestamps
     expected = simulate(grating_frames(), [round(k * 1e6 / 1000) for k in range(12)], SimulatorConfig())
     assert np.array_equal(read_events(out).events, expected.events)
+
+
+def test_simulate_files_is_the_library_call_under_the_command(exr_dir, tmp_path):
+    from simulator.files import simulate_files
+
+    files = sorted(exr_dir.iterdir())
+    t_us = [round(k * 1e6 / 3000) for k in range(len(files))]
+    r = simulate_files(files, t_us, tmp_path / "lib.h5", SimulatorConfig(), progress=False)
+    expected = simulate(grating_frames(), t_us, SimulatorConfig())
+    assert (r.n_events, r.width, r.height) == (len(expected), 32, 24)
+    assert np.array_equal(read_events(tmp_path / "lib.h5").events, expected.events)
+    (exr_dir / "frame_005.exr").write_bytes(b"broken")
+    with pytest.raises(ValueError, match="frame_005.exr"):     # an exception, never SystemExit
+        simulate_files(files, t_us, tmp_path / "bad.h5", progress=False)
+    assert not (tmp_path / "bad.h5").exists() and not list(tmp_path.glob(".bad.h5*"))
