@@ -1,3 +1,4 @@
-"""Dynamic scene reconstruction: `fit` a registered method, `load` a model, `model.render(camera, t)`."""
-from recon.api import fit, load, resolve_config  # noqa: F401
+"""Dynamic scene reconstruction: `fit` a registered method, `load` a model, `model.render(camera, t)`,
+`evaluate` it on a scene's held-out views."""
+from recon.api import evaluate, fit, load, resolve_config  # noqa: F401
 from recon.methods import get_method, method_names  # noqa: F401

@@ -3,6 +3,7 @@
     model = recon.fit("data/quick/lego", method="d3dgs", config="configs/recon/d3dgs_quick.yaml",
                       out_dir="runs/lego/d3dgs")
     image = model.render(camera, t)
+    scores = recon.evaluate(model, "data/quick/lego")     # {psnr, ssim[, lpips], n_images} on the test views
 """
 from __future__ import annotations
 
@@ -31,3 +32,17 @@ def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_di
     cfg = resolve_config(method, config, overrides)
     out = Path(out_dir) if out_dir is not None else Path("runs") / dataset.dir.name / method
     return Trainer(get_method(method)(dataset, cfg), out, progress, on_iteration).run()
+
+
+def evaluate(model: DynamicGaussians, scene_dir: str | Path, split: str = "test", lpips_net: str | None = None,
+             backend: str = "auto") -> dict:
+    """Scores of a trained model on a scene's held-out views, the way the benchmark scores them: the
+    model's own method and config (stored in it) pick the channels and the correction (E-4DGS's
+    log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net)."""
+    from common.metrics.image import score_pairs
+
+    dataset = SceneDataset(scene_dir)
+    method = get_method(model.meta.method)
+    cfg = resolve_config(model.meta.method, model.meta.config or None)
+    pairs = method.scorer(dataset, cfg).eval_pairs(model, dataset.frames(split), backend)
+    return score_pairs(pairs, lpips_net=lpips_net)

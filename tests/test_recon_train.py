@@ -242,3 +242,10 @@ def test_kernel_compilation_is_not_training_time_and_a_resume_is_announced(motio
     log = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
     assert len(warmed) == 2 and warmed[0][0] == "cpu" and warmed[0][2] == 3
     assert log[-1]["iteration"] == 6 and log[-1]["wall_s"] < 1.0     # two 1-second warm-ups, neither counted
+
+
+def test_evaluate_scores_a_model_as_its_training_log_does(trained, motion_scene):
+    log = [json.loads(line) for line in (trained["out"] / "dynamic" / "log.jsonl").read_text().splitlines()]
+    scores = recon.evaluate(recon.load(trained["out"] / "dynamic"), motion_scene)
+    assert scores["n_images"] == len(SceneDataset(motion_scene).frames("test"))
+    assert scores["psnr"] == pytest.approx(log[-1]["test_psnr"], abs=0.01) and 0 < scores["ssim"] <= 1
