@@ -76,11 +76,13 @@ def run_e2vid(args: argparse.Namespace) -> int:
     from e2vid.weights import default_weights_path
     from common.fileio import write_text_atomic
     from common.imageio import write_png
-    from simulator.h5io import EventFileError, read_events
+    from simulator.event_file import EventFile
+    from simulator.h5io import EventFileError
 
     try:
         net, _ = load_checkpoint(args.weights or default_weights_path())
-        stream = read_events(args.events)
+        with EventFile(args.events) as ev:
+            stream = ev.stream()
     except (CheckpointError, EventFileError, FileNotFoundError, OSError) as exc:
         raise SystemExit(f"error: {exc}") from None
     if len(stream) == 0:

@@ -109,22 +109,21 @@ def add_view_parser(sub) -> None:
 
 
 def run_view(args: argparse.Namespace) -> int:
-    from simulator.h5io import EventFileError, read_info, read_window, validate_event_file
     from common.imageio import write_png
+    from simulator.event_file import EventFile
+    from simulator.h5io import EventFileError
     from simulator.view import event_frame, parse_time_us, save_video
 
     try:
-        validate_event_file(args.events)      # every event and the ms index, once (windows trust the index)
-        info = read_info(args.events)
-        start = info["t_offset_us"]
-        end = int(info.get("t_end_us", start)) + 1
+        ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)
+        start, end = ev.t_offset_us, ev.t_end_us + 1
         t0 = parse_time_us(args.t0) if args.t0 is not None else start
         t1 = parse_time_us(args.t1) if args.t1 is not None else end
         if t1 <= t0:
             raise SystemExit(f"error: --t1 ({t1} us) must be after --t0 ({t0} us)")
         suffix = args.out.suffix.lower()
         if suffix == ".png":
-            stream = read_window(args.events, t0, t1)
+            stream = ev.window(t0, t1)
             write_png(args.out, event_frame(stream))
             print(f"{args.out}: {len(stream)} events in [{t0}, {t1}) us")
         elif suffix == ".mp4":
@@ -135,7 +134,7 @@ def run_view(args: argparse.Namespace) -> int:
             starts = range(t0, max(t0 + 1, t1 - window + 1), step)
             from tqdm import tqdm
 
-            frames = [event_frame(read_window(args.events, s, s + window))
+            frames = [event_frame(ev.window(s, s + window))
                       for s in tqdm(starts, desc="view", unit="frame")]
             save_video(args.out, frames, fps=args.fps)
             print(f"{args.out}: {len(frames)} frames of {window} us every {step} us")

@@ -7,6 +7,7 @@
     t = ev.times(i0, i1)            # [i1 - i0] int64 absolute microseconds
     x, y, p = ev.rows(i0, i1)       # uint16, uint16, int8 in {-1, +1}
     i0, i1 = ev.indices(t0, t1)     # index range of events with t0 <= t < t1 (through ms_to_idx)
+    ev.window(t0, t1), ev.stream()  # EventStream of a time window, of the whole file
 """
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ import yaml
 
 from common.config import ConfigError, from_dict
 from simulator.config import SimulatorConfig
-from simulator.h5io import EventFileError, read_info, validate_event_file, window_indices
+from simulator.events import EventStream
+from simulator.h5io import EventFileError, _slice, read_info, validate_event_file, window_indices
 
 
 class EventFile:
@@ -60,6 +62,20 @@ class EventFile:
 
     def indices(self, t0_us: int, t1_us: int) -> tuple[int, int]:
         return window_indices(self._f, int(t0_us), int(t1_us))
+
+    @property
+    def t_end_us(self) -> int:
+        """End of the recording (the writer's t_end_us, else the offset)."""
+        return int(self.info.get("t_end_us", self.t_offset_us))
+
+    def window(self, t0_us: int, t1_us: int) -> EventStream:
+        """Events with t0 <= t < t1 (absolute microseconds)."""
+        i0, i1 = self.indices(t0_us, t1_us)
+        return EventStream(_slice(self._f, i0, i1), self.width, self.height)
+
+    def stream(self) -> EventStream:
+        """Every event of the file."""
+        return EventStream(_slice(self._f, 0, self.n), self.width, self.height)
 
     def close(self) -> None:
         self._f.close()

@@ -21,7 +21,7 @@ from recon.config import E2VIDD3DGSConfig
 from recon.methods import register
 from recon.methods.d3dgs import D3DGS, TrainView
 from recon.views import record_camera
-from simulator.h5io import read_events
+from simulator.event_file import EventFile
 
 
 def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, net: torch.nn.Module | None = None,
@@ -29,7 +29,8 @@ def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, net
     """Frames [K, H, W] in [0, 1] of camera `camera` at the sorted times t_us (net: the shipped one if None)."""
     if net is None:
         net, _ = load_checkpoint(default_weights_path())
-    stream = read_events(dataset.event_file(camera))
+    with EventFile(dataset.event_file(camera)) as ev:
+        stream = ev.stream()
     return reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height,
                               np.asarray(t_us, np.int64), events_per_window or None, net.cfg.num_bins)
 
