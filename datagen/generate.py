@@ -37,8 +37,7 @@ from common.fileio import output_lock, sha256_file, write_text_atomic
 from common.imageio import write_exr, write_png_srgb
 from simulator.h5io import read_info, simulator_attrs
 from simulator.pixel import rec709_luma
-from simulator.events import EVENT_DTYPE
-from simulator.resumable import EventSpool
+from simulator.resumable import EventSpool, can_resume
 from simulator.simulator import EventSimulator
 
 FORMAT_VERSION = 1
@@ -137,14 +136,16 @@ class SceneJob:
     def _resumable_state(self, ckpt: JobCheckpoint) -> dict:
         """The checkpoint's state if its event spools hold what it records, else {} (start over, saying why)."""
         state = ckpt.load() or {}
-        spool_names = [self.dir / "events" / f".cam{k}.h5.spool" for k in range(self.cfg.camera.n_cameras)]
-        if state and any(not p.exists() or p.stat().st_size < int(state[f"n_events_{k}"]) * EVENT_DTYPE.itemsize
-                         for k, p in enumerate(spool_names)):
+        if state and not all(can_resume(self._event_path(k), int(state[f"n_events_{k}"]))
+                             for k in range(self.cfg.camera.n_cameras)):
             print(f"warning: {ckpt.path}: its event spools are missing or shorter than it records; starting "
                   f"{self.cfg.name} over from the first timestamp", flush=True)
             ckpt.remove()
             state = {}
         return state
+
+    def _event_path(self, camera: int) -> Path:
+        return self.dir / "events" / f"cam{camera}.h5"
 
     def _open_streams(self, state: dict):
         """Per camera: the simulator, the event spool and the blur accumulators, restored from `state`."""
@@ -154,7 +155,7 @@ class SceneJob:
         attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
         spools = []
         for k in range(C):
-            spools.append(EventSpool(self.dir / "events" / f"cam{k}.h5", W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
+            spools.append(EventSpool(self._event_path(k), W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
                                      resume_count=int(state[f"n_events_{k}"]) if state else None))
             if state:
                 sims[k].load_state_dict({key[len(f"sim{k}__"):]: v for key, v in state.items() if key.startswith(f"sim{k}__")})

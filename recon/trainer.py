@@ -37,7 +37,7 @@ from recon.evaluate import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
-from recon.method import Method  # noqa: F401  (re-exported: methods subclass it)
+from recon.method import Method
 from recon.views import gray_from_srgb
 from simulator.pixel import linear_to_srgb, rec709_luma
 

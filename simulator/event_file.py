@@ -15,25 +15,23 @@ import dataclasses
 import os
 from pathlib import Path
 
-import h5py
 import numpy as np
 import yaml
 
 from common.config import ConfigError, from_dict
 from simulator.config import SimulatorConfig
 from simulator.events import EventStream
-from simulator.h5io import EventFileError, _slice, read_info, validate_event_file, window_indices
+from simulator.h5io import EventFileError, read_slice, file_info, open_checked, window_indices
 
 
 class EventFile:
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
-        validate_event_file(self.path)
-        self.info = read_info(self.path)
+        self._f = open_checked(self.path, full_check=True)   # opened once, every event checked once
+        self.info = file_info(self._f)
         self.n = int(self.info["n_events"])
         self.width, self.height = int(self.info["width"]), int(self.info["height"])
         self.t_offset_us = int(self.info["t_offset_us"])
-        self._f = h5py.File(self.path, "r")
         self._g = self._f["events"]
         self._sensor: SimulatorConfig | None = None
 
@@ -71,11 +69,11 @@ class EventFile:
     def window(self, t0_us: int, t1_us: int) -> EventStream:
         """Events with t0 <= t < t1 (absolute microseconds)."""
         i0, i1 = self.indices(t0_us, t1_us)
-        return EventStream(_slice(self._f, i0, i1), self.width, self.height)
+        return EventStream(read_slice(self._f, i0, i1), self.width, self.height)
 
     def stream(self) -> EventStream:
         """Every event of the file."""
-        return EventStream(_slice(self._f, 0, self.n), self.width, self.height)
+        return EventStream(read_slice(self._f, 0, self.n), self.width, self.height)
 
     def close(self) -> None:
         self._f.close()

@@ -155,7 +155,7 @@ def write_events(path: str | os.PathLike, stream: EventStream, t_offset_us: int 
     return Path(path)
 
 
-def _open(path: str | os.PathLike, full_check: bool = False) -> h5py.File:
+def open_checked(path: str | os.PathLike, full_check: bool = False) -> h5py.File:
     """Open an event file after checking its layout and structure (and, with full_check, every
     event: simulator.event_check), each at most once per file version and process."""
     path = Path(path)
@@ -202,12 +202,7 @@ def _validate_once(path: Path, f: h5py.File, full: bool) -> None:
     _VALIDATED.add(key + (full,))
 
 
-def validate_event_file(path: str | os.PathLike) -> None:
-    """Check every event of the file (once per file version and process); raises EventFileError."""
-    _open(path, full_check=True).close()
-
-
-def _slice(f: h5py.File, i0: int, i1: int) -> np.ndarray:
+def read_slice(f: h5py.File, i0: int, i1: int) -> np.ndarray:
     """Events i0 .. i1 - 1, checked as they are read (sorted, inside the sensor, polarity 0 / 1)."""
     g = f["events"]
     out = np.empty(i1 - i0, EVENT_DTYPE)
@@ -225,20 +220,25 @@ def _slice(f: h5py.File, i0: int, i1: int) -> np.ndarray:
     return out
 
 
+def file_info(f: h5py.File) -> dict[str, Any]:
+    """Attributes of an open event file plus n_events and t_offset_us, without reading events."""
+    info = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+    info["n_events"] = int(f["events/t"].shape[0])
+    info["t_offset_us"] = int(f["t_offset"][()])
+    return info
+
+
 def read_info(path: str | os.PathLike) -> dict[str, Any]:
     """Attributes plus n_events and t_offset_us, without reading events."""
-    with _open(path) as f:
-        info = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
-        info["n_events"] = int(f["events/t"].shape[0])
-        info["t_offset_us"] = int(f["t_offset"][()])
-        return info
+    with open_checked(path) as f:
+        return file_info(f)
 
 
 def read_events(path: str | os.PathLike) -> EventStream:
     """The whole stream of an event file (every event checked)."""
-    with _open(path, full_check=True) as f:
+    with open_checked(path, full_check=True) as f:
         n = f["events/t"].shape[0]
-        return EventStream(_slice(f, 0, n), int(f.attrs["width"]), int(f.attrs["height"]))
+        return EventStream(read_slice(f, 0, n), int(f.attrs["width"]), int(f.attrs["height"]))
 
 
 def window_indices(f: h5py.File, t0_us: int, t1_us: int) -> tuple[int, int]:
@@ -272,9 +272,9 @@ def window_indices(f: h5py.File, t0_us: int, t1_us: int) -> tuple[int, int]:
 
 def read_window(path: str | os.PathLike, t0_us: int, t1_us: int) -> EventStream:
     """Events with t0_us <= t < t1_us (absolute microseconds), read through ms_to_idx."""
-    with _open(path) as f:
+    with open_checked(path) as f:
         i0, i1 = window_indices(f, int(t0_us), int(t1_us))
-        return EventStream(_slice(f, i0, i1), int(f.attrs["width"]), int(f.attrs["height"]))
+        return EventStream(read_slice(f, i0, i1), int(f.attrs["width"]), int(f.attrs["height"]))
 
 
 def simulator_attrs(config) -> dict[str, Any]:

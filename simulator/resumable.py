@@ -27,6 +27,18 @@ class SpoolResumeError(ValueError):
     """The spool a checkpoint refers to is missing or shorter than the checkpoint's event count."""
 
 
+def spool_path_for(path: str | os.PathLike) -> Path:
+    """The hidden spool file of event output `path`."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.spool")
+
+
+def can_resume(path: str | os.PathLike, count: int) -> bool:
+    """Whether the spool of output `path` holds at least `count` events (what a checkpoint recorded)."""
+    spool = spool_path_for(path)
+    return count == 0 or (spool.exists() and spool.stat().st_size >= count * EVENT_DTYPE.itemsize)
+
+
 class EventSpool:
     """Append-only event output of one sensor, resumable at the counts `sync()` returned."""
 
@@ -35,10 +47,10 @@ class EventSpool:
         self.path = Path(path)
         self.width, self.height, self.t_offset_us = int(width), int(height), int(t_offset_us)
         self.attrs = dict(attrs or {})
-        self.spool_path = self.path.with_name(f".{self.path.name}.spool")
+        self.spool_path = spool_path_for(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         n = int(resume_count or 0)
-        if n and (not self.spool_path.exists() or self.spool_path.stat().st_size < n * EVENT_DTYPE.itemsize):
+        if not can_resume(self.path, n):
             raise SpoolResumeError(f"{self.spool_path}: cannot resume at {n} events: the spool is missing or shorter")
         self._spool = open(self.spool_path, "r+b" if n else "w+b")
         self._spool.truncate(n * EVENT_DTYPE.itemsize)

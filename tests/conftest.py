@@ -16,17 +16,22 @@ def rng():
     return np.random.default_rng(1234)
 
 
-@pytest.fixture(scope="session")
-def motion_scene(tmp_path_factory):
-    """The `tiny_motion` preset's cubes scene (Blender + simulator, ~4 s): 2 cameras, 64x48, 61
-    timestamps, 46 train / 16 test frames, blur levels mild and strong. Shared by the recon tests."""
+def generate_cubes(tmp_path_factory, preset: str):
+    """The cubes scene of dataset preset `preset`, generated into a fresh temporary folder."""
     import subprocess
     import sys
     from pathlib import Path
 
-    out = tmp_path_factory.mktemp("tiny_motion")
+    out = tmp_path_factory.mktemp(preset)
     root = Path(__file__).resolve().parent.parent
-    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", "tiny_motion",
+    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", preset,
                         "--out", str(out), "--no-progress"], capture_output=True, text=True, cwd=root)
     assert r.returncode == 0, r.stderr
     return out / "cubes"
+
+
+@pytest.fixture(scope="session")
+def motion_scene(tmp_path_factory):
+    """The `tiny_motion` preset's cubes scene (Blender + simulator, ~4 s): 2 cameras, 64x48, 61
+    timestamps, 46 train / 16 test frames, blur levels mild and strong. Shared by the recon tests."""
+    return generate_cubes(tmp_path_factory, "tiny_motion")

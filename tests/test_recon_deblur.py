@@ -10,21 +10,13 @@ from datagen.dataset import SceneDataset
 from recon import events as ev
 from recon.evaluate import evaluate_psnr
 from recon.methods.deblur_d3dgs import lowres_l1
+from tests.conftest import generate_cubes
 
 
 @pytest.fixture(scope="module")
 def pan_scene(tmp_path_factory):
     """The `tiny_pan` preset: cubes held still, two cameras sweeping 120 degrees in 20 ms, 64x48."""
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    out = tmp_path_factory.mktemp("tiny_pan")
-    root = Path(__file__).resolve().parent.parent
-    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", "tiny_pan",
-                        "--out", str(out), "--no-progress"], capture_output=True, text=True, cwd=root)
-    assert r.returncode == 0, r.stderr
-    return out / "cubes"
+    return generate_cubes(tmp_path_factory, "tiny_pan")
 
 
 def test_exposure_mean_averages_linear_light_and_lowres_l1_compares_block_means():

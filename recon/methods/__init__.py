@@ -1,7 +1,7 @@
 """The methods registry: every reconstruction method the toolkit can train, by name.
 
 A method is a class with `name`, `config_cls` (its typed config dataclass, which has a `train:
-TrainConfig` field) and the hooks the shared trainer calls (see `recon.trainer.Method`). Later
+TrainConfig` field) and the hooks the shared trainer calls (see `recon.method.Method`). Later
 modules add themselves with `@register`.
 """
 from __future__ import annotations
