@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from common.argtypes import add_ray_arguments, ray_options
+
 
 def add_bench_parser(sub) -> None:
     p = sub.add_parser("bench", help="train every method on every scene of a preset and build the leaderboard",
@@ -21,6 +23,7 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<preset>)")
     p.add_argument("--report", action="store_true", help="only regenerate tables and plots from results.jsonl")
     p.add_argument("--no-progress", action="store_true")
+    add_ray_arguments(p, "each (scene, cell) job (and any missing scene's generation)")
     p.set_defaults(func=run_bench_cli)
 
 
@@ -58,7 +61,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
         studies = tuple(split(args.studies) or ())
         try:
             run_bench(cfg, name, args.data or Path("data") / cfg.dataset, out, scenes, cells, studies,
-                      progress=not args.no_progress)
+                      progress=not args.no_progress, ray=ray_options(args))
         except (ConfigError, FileNotFoundError, ValueError, RuntimeError) as exc:
             raise SystemExit(f"error: {exc}") from None
     try:

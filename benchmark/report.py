@@ -55,9 +55,26 @@ def _average(table, cell, scenes, key):
     return sum(vals) / len(vals) if len(vals) == len(scenes) and vals else None
 
 
-def leaderboard(rows: list[dict], header: str = "") -> tuple[str, str]:
+def is_failed(row: dict) -> bool:
+    """A job that failed on every attempt (a Ray run's record of it; it has no metrics)."""
+    return row.get("status") == "failed"
+
+
+def failed_section(failed: list[dict]) -> str:
+    if not failed:
+        return ""
+    lines = [f"| {r['key']} | {r.get('error', '')} |" for r in failed]
+    return ("\n### Failed jobs\n\nThese jobs failed on every attempt; `e4dgs bench` runs them again. Their worker "
+            "logs are in logs/.\n\n| Job | Last error |\n|---|---|\n" + "\n".join(lines) + "\n")
+
+
+def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> tuple[str, str]:
     scenes, table = main_table(rows)
-    cells = [c for c in MAIN_CELLS if c in table]
+    for r in failed:                      # a failed main job still gets its row and column
+        if r["study"] == "main" and r["scene"] not in scenes:
+            scenes.append(r["scene"])
+    failed_cells = {(r["cell"], r["scene"]) for r in failed if r["study"] == "main"}
+    cells = [c for c in MAIN_CELLS if c in table or any(fc == c for fc, _ in failed_cells)]
     columns = [(s, k) for s in scenes for k, _, _ in METRICS] + [("average", k) for k, _, _ in METRICS]
     values = {col: {c: (_average(table, c, scenes, col[1]) if col[0] == "average"
                         else table[c].get(col[0], {}).get(col[1])) for c in cells} for col in columns}
@@ -77,8 +94,9 @@ def leaderboard(rows: list[dict], header: str = "") -> tuple[str, str]:
         t = sum(times) / len(times) if times else None
         g = sum(gauss) / len(gauss) if gauss else None
         tail = f" | {t:.0f} | {g:.0f} |\n" if t is not None else " | – | – |\n"
-        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(_mark(_fmt(k, values[(s, k)][c]), ranks[(s, k)].get(c, ""))
-                                                       for s, k in columns) + tail)
+        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(
+            "failed" if (c, s) in failed_cells else _mark(_fmt(k, values[(s, k)][c]), ranks[(s, k)].get(c, ""))
+            for s, k in columns) + tail)
         w.writerow([c, LABELS.get(c, c)] + [("" if values[col][c] is None else f"{values[col][c]:.4f}") for col in columns]
                    + ["" if t is None else f"{t:.1f}", "" if g is None else f"{g:.0f}"])
     md.write("\nBest per column in **bold**, second <u>underlined</u>. PSNR/SSIM/LPIPS are means of per-image "
@@ -94,6 +112,7 @@ def leaderboard(rows: list[dict], header: str = "") -> tuple[str, str]:
                 if r:
                     md.write(f"| {s} | {LABELS.get(c, c)} | {_fmt('psnr', r['psnr'])} | {_fmt('ssim', r['ssim'])} | "
                              f"{_fmt('lpips', r['lpips'])} | {r['iterations']} | {r['wall_s']:.0f} | {r['n_gaussians']} |\n")
+    md.write(failed_section(list(failed)))
     return md.getvalue(), out_csv.getvalue()
 
 
@@ -208,7 +227,9 @@ def leaderboard_json(rows: list[dict]) -> str:
 def write_report(rows: list[dict], out_root: Path, header: str = "") -> list[Path]:
     if not rows:
         raise ValueError(f"{out_root}: no results to report")
-    md, table_csv = leaderboard(rows, header)
+    failed = [r for r in rows if is_failed(r)]
+    rows = [r for r in rows if not is_failed(r)]
+    md, table_csv = leaderboard(rows, header, failed)
     written = []
     for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv), ("leaderboard.json", leaderboard_json(rows)),
                        ("accuracy_vs_time.md", accuracy_vs_time(rows)), ("blur.md", blur_table(rows)),

@@ -47,14 +47,14 @@ def write_results(path: Path, rows: list[dict]) -> None:
     write_text_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows))
 
 
-def ensure_dataset(cfg: BenchConfig, data_root: Path, log: Callable[[str], None]) -> None:
+def ensure_dataset(cfg: BenchConfig, data_root: Path, log: Callable[[str], None], ray=None) -> None:
     missing = [s for s in cfg.scenes if not (data_root / s / "manifest.json").exists()]
     if not missing:
         return
     from datagen.build import generate_dataset
 
     log(f"bench: generating dataset {cfg.dataset} for {', '.join(missing)} -> {data_root}")
-    failed = generate_dataset(cfg.dataset, missing, data_root, jobs=min(2, len(missing)), log=log)
+    failed = generate_dataset(cfg.dataset, missing, data_root, jobs=min(2, len(missing)), log=log, ray=ray)
     if failed:
         raise RuntimeError(f"dataset generation failed for {', '.join(failed)} (run `e4dgs bench` again to resume)")
 
@@ -122,33 +122,45 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
 
 def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,
               cells: list[str] | None = None, studies: tuple[str, ...] = ("main", "blur", "ablation"),
-              progress: bool = True, log: Callable[[str], None] = print) -> list[dict]:
+              progress: bool = True, log: Callable[[str], None] = print, ray=None) -> list[dict]:
+    """Run every job not yet in results.jsonl, in this process one after another, or as Ray tasks
+    when `ray` is a common.taskpool.RayOptions (Ray is imported only then). Returns all rows."""
     todo = [j for j in jobs(cfg) if j.study in studies and (not scenes or j.scene in scenes)
             and (not cells or j.cell in cells)]
     needed = sorted({j.scene for j in todo})
     resolved = {j.key: resolve_job(j) for j in todo}   # every job's config, checked before any work
     t_start = time.time()
-    ensure_dataset(BenchConfig(**{**cfg.__dict__, "scenes": tuple(needed)}), data_root, log)
+    ensure_dataset(BenchConfig(**{**cfg.__dict__, "scenes": tuple(needed)}), data_root, log, ray)
     dataset_s = time.time() - t_start
     out_root.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out_root / "bench.json", json.dumps({"preset": preset_name, **dump(cfg)}, indent=1))
     results_path = out_root / "results.jsonl"
     rows = read_results(results_path)
-    done = {(r["key"], r["config_hash"]) for r in rows}
+    done = {(r["key"], r["config_hash"]) for r in rows if r.get("status") != "failed"}
     if cfg.description:
         log(f"bench {preset_name}: " + " ".join(cfg.description.split()))
     log(f"bench {preset_name}: {len(todo)} job(s) on {', '.join(needed)}; "
         f"{sum((j.key, j.config_hash()) in done for j in todo)} already in {results_path}")
-    t0 = time.time()
-    for n, job in enumerate(todo, 1):
-        if (job.key, job.config_hash()) in done:
-            continue
-        log(f"bench [{n}/{len(todo)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
-        row = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
-        rows = [r for r in rows if r["key"] != job.key] + [row]
+
+    def record(new_rows: list[dict]) -> None:          # the driver is the only writer of results.jsonl
+        nonlocal rows
+        keys = {r["key"] for r in new_rows}
+        rows = [r for r in rows if r["key"] not in keys] + new_rows
         write_results(results_path, rows)
-        log(f"bench [{n}/{len(todo)}] {job.key}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
-            f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
+
+    t0 = time.time()
+    remaining = [j for j in todo if (j.key, j.config_hash()) not in done]
+    if ray is not None:
+        from benchmark.distributed import run_jobs_on_ray
+
+        run_jobs_on_ray(remaining, resolved, cfg, data_root, out_root, ray, record, progress, log)
+    else:
+        for n, job in enumerate(remaining, 1):
+            log(f"bench [{n}/{len(remaining)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
+            row = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
+            record([row])
+            log(f"bench [{n}/{len(remaining)}] {job.key}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
+                f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
     log(f"bench {preset_name}: done in {time.time() - t_start:.0f} s ({dataset_s:.0f} s dataset, "
         f"{time.time() - t0:.0f} s jobs) -> {results_path}")
     return rows

@@ -34,3 +34,28 @@ def positive_float(text: str) -> float:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
     return value
+
+
+def add_ray_arguments(p: argparse.ArgumentParser, what: str) -> None:
+    """--ray [ADDRESS], --ray-retries, --ray-cpus, --ray-local-cpus: run `what` as Ray tasks."""
+    g = p.add_argument_group("Ray (optional: pip install 'e4dgs-toolkit[ray]')")
+    g.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help=f"run {what} as Ray tasks: on the cluster at ADDRESS ('auto', 'ray://host:10001'), or on a "
+                        "Ray started on this machine when no address is given. Data and output folders must be "
+                        "paths every node sees.")
+    g.add_argument("--ray-retries", type=nonnegative_int, default=2, metavar="N",
+                   help="re-runs of a task that fails or whose worker dies, before it is reported failed (default 2)")
+    g.add_argument("--ray-cpus", type=positive_float, default=1.0, metavar="N",
+                   help="CPUs each task asks for (its threads; default 1)")
+    g.add_argument("--ray-local-cpus", type=positive_int, default=None, metavar="N",
+                   help="CPUs of the Ray started on this machine (default: all)")
+
+
+def ray_options(args: argparse.Namespace):
+    """The common.taskpool.RayOptions the --ray arguments ask for, or None without --ray."""
+    if args.ray is None:
+        return None
+    from common.taskpool import RayOptions
+
+    return RayOptions(address=args.ray, retries=args.ray_retries, local_cpus=args.ray_local_cpus,
+                      cpus_per_task=args.ray_cpus)

@@ -2,6 +2,12 @@
 global state, so each scene renders in its own interpreter), several side by side.
 
     failed = generate_dataset("quick", ["lego"], Path("data/quick"), jobs=1)   # [] when every scene finished
+    failed = generate_dataset("quick", None, Path("/shared/data/quick"), ray=RayOptions("auto"))  # on a cluster
+
+With `ray` (a common.taskpool.RayOptions) each scene is a Ray task that runs the same worker process on
+whichever node Ray picks; `out` must then be a path every node sees (a shared file system). A task
+whose worker dies or fails is retried (the scene resumes from its checkpoint); the worker's output
+goes to out/logs/<scene>.log.
 """
 from __future__ import annotations
 
@@ -25,13 +31,54 @@ def preset_scenes(preset: str | Path, wanted: list[str] | None = None) -> list[s
     return scenes
 
 
+def _worker_cmd(preset: str | Path, scene: str, out: Path, checkpoint_every: int) -> list[str]:
+    return [sys.executable, "-m", "datagen.generate", "--scene", scene, "--preset", str(preset),
+            "--out", str(out), "--checkpoint-every", str(checkpoint_every)]
+
+
+def generate_scene_task(preset: str | Path, scene: str, out: Path, checkpoint_every: int) -> str:
+    """A Ray task: one scene's worker process, its output into the task's log; raises if it fails."""
+    proc = subprocess.run(_worker_cmd(preset, scene, out, checkpoint_every) + ["--no-progress"],
+                          stdout=sys.stdout, stderr=sys.stderr)
+    if proc.returncode != 0:
+        raise RuntimeError(f"scene {scene}: worker exited with status {proc.returncode}")
+    return scene
+
+
+def _generate_on_ray(preset, scenes: list[str], out: Path, checkpoint_every: int, ray,
+                     log: Callable[[str], None]) -> list[str]:
+    from common.taskpool import TaskSpec, run_tasks
+
+    out = Path(out).resolve()                                   # workers may run in another folder or node
+    preset = Path(preset).resolve() if Path(preset).suffix in (".yaml", ".yml") else preset
+    specs = [TaskSpec(s, generate_scene_task, (str(preset), s, out, checkpoint_every), num_cpus=ray.cpus_per_task,
+                      log_path=out / "logs" / f"{s}.log") for s in scenes]
+    failed: list[str] = []
+
+    def done(outcome) -> None:
+        if not outcome.ok:
+            failed.append(outcome.key)
+            log(f"dataset: {outcome.key} failed after {ray.retries} retries: {outcome.error} (log: {out / 'logs'})")
+
+    run_tasks(specs, ray, done, desc="dataset")
+    return failed
+
+
 def generate_dataset(preset: str | Path, scenes: list[str] | None, out: Path, jobs: int = 1,
-                     checkpoint_every: int = 100, log: Callable[[str], None] = print) -> list[str]:
+                     checkpoint_every: int = 100, log: Callable[[str], None] = print, ray=None) -> list[str]:
     """Generate (or resume, or skip when complete) each scene into out/<scene>; returns the scenes
-    whose worker failed. Finished scenes are skipped by their workers, killed ones resume."""
+    whose worker failed. Finished scenes are skipped by their workers, killed ones resume. `jobs`
+    scenes run side by side here, or every scene as a Ray task when `ray` is given."""
     if jobs < 1 or checkpoint_every < 1:
         raise ValueError(f"jobs and checkpoint_every must be >= 1, got {jobs}, {checkpoint_every}")
     scenes = preset_scenes(preset, scenes)
+    if ray is not None:
+        log(f"dataset: preset {preset}, {len(scenes)} scene(s) -> {out} as Ray tasks "
+            f"({ray.cpus_per_task:g} CPU each, {ray.retries} retries)")
+        t0 = time.time()
+        failed = _generate_on_ray(preset, scenes, out, checkpoint_every, ray, log)
+        log(f"dataset: {len(scenes) - len(failed)} of {len(scenes)} scene(s) done in {time.time() - t0:.0f} s -> {out}")
+        return failed
     log(f"dataset: preset {preset}, {len(scenes)} scene(s) -> {out} ({jobs} at a time)")
     t0 = time.time()
     pending = list(scenes)
@@ -40,8 +87,7 @@ def generate_dataset(preset: str | Path, scenes: list[str] | None, out: Path, jo
     while pending or running:
         while pending and len(running) < jobs:
             scene = pending.pop(0)
-            cmd = [sys.executable, "-m", "datagen.generate", "--scene", scene, "--preset", str(preset),
-                   "--out", str(out), "--checkpoint-every", str(checkpoint_every), "--position", str(len(running))]
+            cmd = _worker_cmd(preset, scene, out, checkpoint_every) + ["--position", str(len(running))]
             running.append((scene, subprocess.Popen(cmd)))
         for scene, proc in list(running):
             if proc.poll() is not None:

@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import positive_int
+from common.argtypes import add_ray_arguments, positive_int, ray_options
 
 
 def add_dataset_parser(sub) -> None:
@@ -17,6 +17,7 @@ def add_dataset_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="dataset root (default data/<preset>)")
     p.add_argument("--jobs", type=positive_int, default=1, help="scenes generated side by side (default 1)")
     p.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
+    add_ray_arguments(p, "each scene's generation")
     p.set_defaults(func=run_dataset)
 
 
@@ -26,7 +27,7 @@ def run_dataset(args: argparse.Namespace) -> int:
     wanted = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
     scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
-    failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every)
+    failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every, ray=ray_options(args))
     done = [s for s in scenes if s not in failed]
     if done and out.is_dir():
         from datagen.summary import blur_table

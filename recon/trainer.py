@@ -248,7 +248,7 @@ class Trainer:
         """Resume the checkpoint (saying so) or set up a fresh model; compile the rasterizer untimed."""
         if not self._load_checkpoint():
             self.setup()
-        elif self.progress:
+        else:                              # said even without progress bars: a job's log shows its resumes
             tqdm.write(f"{self.method.name}: resuming {self.out} at iteration {self.iteration} of "
                        f"{self.tcfg.iterations} ({self.wall_s:.0f} s trained so far)")
         # kernel compilation (numba's first call, gsplat's CUDA build) is not training time

@@ -38,13 +38,23 @@ def test_the_layers_are_documented_as_tested():
         assert f"| {layer} | `{pkg}/` |" in text, pkg
 
 
-def test_only_the_render_packages_import_bpy():
+def _importers_of(module: str) -> set[str]:
+    """Files (relative to the repository) with an `import module` / `from module ...` anywhere in them."""
     users = set()
     for pkg in LAYERS:
         for f in (ROOT / pkg).rglob("*.py"):
             for node in ast.walk(ast.parse(f.read_text())):
-                if isinstance(node, ast.Import) and any(a.name.split(".")[0] == "bpy" for a in node.names):
-                    users.add(pkg)
-                elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "bpy":
-                    users.add(pkg)
+                if isinstance(node, ast.Import) and any(a.name.split(".")[0] == module for a in node.names):
+                    users.add(str(f.relative_to(ROOT)))
+                elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == module:
+                    users.add(str(f.relative_to(ROOT)))
+    return users
+
+
+def test_only_the_render_packages_import_bpy():
+    users = {f.split("/")[0] for f in _importers_of("bpy")}
     assert users <= {"datagen", "blender_scenes"}, users
+
+
+def test_only_the_task_pool_imports_ray():
+    assert _importers_of("ray") == {"common/taskpool.py"}     # and only inside a function (tests/test_ray.py)

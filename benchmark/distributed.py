@@ -1,0 +1,76 @@
+"""`e4dgs bench --ray`: the benchmark's jobs as Ray tasks (the engine is common.taskpool).
+
+Jobs that share a training folder (the ablation's full seed-0 run is the main E-4DGS cell) form one
+task, so two workers never train into the same folder. A task verifies its scene against the
+manifest on the worker (sizes and SHA-256: the data path must show every node the same files),
+trains or resumes, scores, and returns the rows; only the driver writes results.jsonl, once per
+finished task. A task that still fails after its retries becomes a row with status "failed" (the
+leaderboard names it); a later `e4dgs bench` runs it again.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from benchmark.config import BenchConfig, Job
+from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
+
+
+def run_group(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path, method_cfgs: list) -> list[dict]:
+    """On a worker: check the scene's files, then train (or resume) and score each job of one folder."""
+    from benchmark.runner import run_job
+    from datagen.verify import verify_scene
+
+    scene_dir = data_root / jobs[0].scene
+    problems = verify_scene(scene_dir)
+    if problems:
+        raise ValueError(f"{scene_dir} on this node does not match its manifest: {problems[0]}"
+                         + (f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""))
+    return [run_job(job, cfg, data_root, out_root, progress=False, method_cfg=mc) for job, mc in zip(jobs, method_cfgs)]
+
+
+def failed_row(job: Job, run_dir: str, error: str) -> dict:
+    return {"key": job.key, "study": job.study, "scene": job.scene, "cell": job.cell, "variant": job.variant,
+            "seed": job.seed, "method": job.method, "config": job.config, "overrides": job.overrides,
+            "config_hash": job.config_hash(), "run_dir": run_dir, "status": "failed", "error": error}
+
+
+def wants_gpu(method_cfg) -> bool:
+    """Training asks for a GPU when its device may be CUDA (auto or cuda[:N])."""
+    return str(method_cfg.train.device).split(":")[0] in ("auto", "cuda")
+
+
+def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root: Path, out_root: Path,
+                    opts: RayOptions, record: Callable[[list[dict]], None], progress: bool = True,
+                    log: Callable[[str], None] = print) -> int:
+    """Run `todo` as Ray tasks, calling record(rows) on the driver as each task ends; returns failures."""
+    data_root, out_root = Path(data_root).resolve(), Path(out_root).resolve()   # workers may run elsewhere
+    groups: dict[str, list[Job]] = {}
+    for job in todo:
+        groups.setdefault(f"{job.scene}/{job.method}-{job.config_hash()}", []).append(job)
+    with ray_session(opts):
+        gpus = cluster_gpus()
+        specs = []
+        for run_dir, group in groups.items():
+            mcs = [resolved[j.key] for j in group]
+            specs.append(TaskSpec(run_dir, run_group, (group, cfg, data_root, out_root, mcs),
+                                  num_cpus=opts.cpus_per_task, num_gpus=1.0 if gpus and wants_gpu(mcs[0]) else 0.0,
+                                  log_path=out_root / "logs" / f"{run_dir.replace('/', '__')}.log"))
+        log(f"bench: {len(todo)} job(s) as {len(specs)} Ray task(s), {opts.cpus_per_task:g} CPU each"
+            f"{', one GPU per training task' if gpus else ''}; {opts.retries} retries; logs in {out_root / 'logs'}")
+        failures = 0
+
+        def done(outcome: TaskOutcome) -> None:
+            nonlocal failures
+            if outcome.ok:
+                record(outcome.value)
+                for row in outcome.value:
+                    log(f"bench {row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
+                        f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
+            else:
+                failures += len(groups[outcome.key])
+                record([failed_row(j, outcome.key, outcome.error) for j in groups[outcome.key]])
+                log(f"bench {outcome.key}: FAILED after {opts.retries} retries: {outcome.error}")
+
+        run_tasks(specs, opts, done, desc="bench", progress=progress)
+    return failures

@@ -1,0 +1,193 @@
+"""Independent jobs as Ray tasks: the engine under `e4dgs bench --ray` and `e4dgs dataset --ray`.
+
+Ray is imported only here and only when a caller asks for it, so the serial paths (no `--ray`) never
+load it. Each job is a module-level function plus arguments (pickled by reference, so every node must
+have this package installed) with stated resources. The driver submits them all, keeps one progress
+bar (done / running / failed) and hands each outcome to a callback as it arrives, so a caller can
+record results as they come in and nothing finished is lost when a later job fails.
+
+    specs = [TaskSpec("lego", generate_scene, ("quick", "lego", out), num_cpus=2, log_path=out / "logs/lego.log")]
+    run_tasks(specs, RayOptions(address=None), on_outcome=print)
+
+Failures: a task that raises, or whose worker process dies, is retried `retries` times (Ray re-runs it,
+possibly on another node; our jobs resume from their checkpoints). After that its outcome carries the
+error and the others go on. Each attempt's stdout/stderr and traceback are appended to its log file.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+LOCAL = "local"          # `--ray` without an address: start a Ray instance on this machine
+
+
+@dataclass(frozen=True)
+class RayOptions:
+    address: str | None = None         # None or "local": start Ray here; else a cluster address ("auto", "ray://host:10001")
+    retries: int = 2                   # re-runs after a failure or a dead worker, then the job is reported failed
+    local_cpus: int | None = None      # CPUs of a locally started Ray (default: all of this machine's)
+    cpus_per_task: float = 1.0         # CPUs each job asks for (its torch / numba threads)
+
+    def __post_init__(self):
+        if self.retries < 0:
+            raise ValueError(f"Ray retries must be >= 0, got {self.retries}")
+        if self.local_cpus is not None and self.local_cpus < 1:
+            raise ValueError(f"local Ray CPUs must be >= 1, got {self.local_cpus}")
+        if self.cpus_per_task <= 0:
+            raise ValueError(f"CPUs per Ray task must be > 0, got {self.cpus_per_task}")
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    key: str                           # names the job in the bar, the log and the outcome
+    fn: Callable[..., Any]             # module-level function run on a worker
+    args: tuple = ()
+    num_cpus: float = 1.0
+    num_gpus: float = 0.0
+    log_path: Path | None = None       # each attempt's output is appended here (a path every node sees)
+
+
+@dataclass(frozen=True)
+class TaskOutcome:
+    key: str
+    value: Any = None
+    error: str | None = None           # None: finished; else the last attempt's error, one line
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError("--ray needs Ray: pip install 'e4dgs-toolkit[ray]' (or pip install ray)") from None
+    return ray
+
+
+def limit_threads(n: int) -> None:
+    """Keep a task to its n CPUs: torch's and numba's thread pools here, and child processes' via the
+    environment. (Ray sets OMP_NUM_THREADS alone; numba would still start one thread per core, and
+    two tasks sharing a core each collapse, measured 2.6x slower on this project's 2-core machine.)"""
+    os.environ["OMP_NUM_THREADS"] = os.environ["NUMBA_NUM_THREADS"] = str(n)
+    import numba
+    import torch
+
+    torch.set_num_threads(n)
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | None, tracker=None,
+               threads: int | None = None) -> Any:
+    """One attempt of a job on a worker: announce it, limit its threads, send its output to the job's
+    log, re-raise errors."""
+    if tracker is not None:
+        tracker.started.remote(key)
+    if threads is not None:
+        limit_threads(threads)
+    if log_path is None:
+        return fn(*args)
+    Path(log_path).parent.mkdir(parents=True, exist_ok=True)
+    with open(log_path, "a", buffering=1) as log, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+        print(f"--- {key}: attempt started {time.strftime('%Y-%m-%d %H:%M:%S')} on {socket.gethostname()} "
+              f"(pid {os.getpid()})")
+        try:
+            value = fn(*args)
+        except BaseException:
+            traceback.print_exc()
+            raise
+        print(f"--- {key}: finished {time.strftime('%Y-%m-%d %H:%M:%S')}")
+        return value
+
+
+class _Tracker:
+    """Which jobs have started an attempt (a tiny Ray actor; the bar's 'running' count)."""
+
+    def __init__(self):
+        self.keys: set[str] = set()
+
+    def started(self, key: str) -> None:
+        self.keys.add(key)
+
+    def started_keys(self) -> set[str]:
+        return set(self.keys)
+
+
+def _one_line(exc: BaseException) -> str:
+    """The root error of a Ray exception in one line ('ValueError: ...', 'worker died ...')."""
+    cause = getattr(exc, "cause", None)
+    if isinstance(cause, BaseException):
+        return f"{type(cause).__name__}: {str(cause).splitlines()[0] if str(cause) else ''}".rstrip(": ")
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+@contextlib.contextmanager
+def ray_session(opts: RayOptions):
+    """Connect to the cluster at opts.address, or start a local Ray (shut down again on exit)."""
+    ray = _import_ray()
+    if ray.is_initialized():
+        yield ray
+        return
+    kwargs = {"log_to_driver": False, "include_dashboard": False}
+    if opts.address in (None, LOCAL):
+        ray.init(num_cpus=opts.local_cpus or os.cpu_count(), **kwargs)
+    else:
+        ray.init(address=opts.address, **kwargs)
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def cluster_gpus() -> float:
+    """GPUs in the connected cluster (call inside ray_session; 0 for a local Ray without one)."""
+    return float(_import_ray().cluster_resources().get("GPU", 0.0))
+
+
+def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[TaskOutcome], None],
+              desc: str = "jobs", progress: bool = True) -> list[TaskOutcome]:
+    """Run every spec as a Ray task; call on_outcome (on the driver) as each finishes or finally fails."""
+    from tqdm import tqdm
+
+    keys = [s.key for s in specs]
+    if len(set(keys)) != len(keys):
+        raise ValueError("task keys must be unique")
+    outcomes: list[TaskOutcome] = []
+    if not specs:
+        return outcomes
+    with ray_session(opts) as ray:
+        tracker = ray.remote(num_cpus=0)(_Tracker).remote()
+        remote = ray.remote(run_logged)
+        pending = {}
+        for s in specs:
+            ref = remote.options(num_cpus=s.num_cpus, num_gpus=s.num_gpus, max_retries=opts.retries,
+                                 retry_exceptions=True, name=s.key).remote(
+                s.fn, s.args, s.key, None if s.log_path is None else str(s.log_path), tracker,
+                max(1, int(s.num_cpus)))
+            pending[ref] = s
+        failed = 0
+        with tqdm(total=len(specs), desc=desc, unit="job", disable=not progress) as bar:
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+                for ref in ready:
+                    spec = pending.pop(ref)
+                    try:
+                        outcome = TaskOutcome(spec.key, value=ray.get(ref))
+                    except ray.exceptions.RayError as exc:
+                        outcome = TaskOutcome(spec.key, error=_one_line(exc))
+                        failed += 1
+                    outcomes.append(outcome)
+                    on_outcome(outcome)
+                    bar.update(1)
+                started = ray.get(tracker.started_keys.remote())
+                running = sum(s.key in started for s in pending.values())
+                bar.set_postfix_str(f"done {len(outcomes) - failed}, running {running}, failed {failed}")
+    return outcomes

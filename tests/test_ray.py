@@ -1,0 +1,197 @@
+"""Scale-out on Ray (a local Ray with 2 worker CPUs): the tiny bench grid gives the serial run's
+numbers, a worker killed mid-job is retried and every row arrives, a job that keeps failing becomes
+a 'failed' row without losing the others, scene files are verified on the worker, and a dataset
+generated through Ray is byte-identical to the serial one. The serial paths never import Ray."""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from benchmark.config import BenchConfig, CellSpec
+from benchmark.report import write_report
+from benchmark.runner import read_results, run_bench
+from common.config import build_config
+from common.taskpool import RayOptions, TaskSpec, run_tasks
+
+ROOT = Path(__file__).resolve().parent.parent
+TINY = {"train.iterations": 12, "train.scale_schedule": False, "train.warm_up": 200,
+        "train.densify.enabled": False, "train.init.n_points_object": 300, "train.checkpoint_every": 5,
+        "train.snapshots": [0.5, 1.0]}
+GRID = ["d3dgs_sharp", "d3dgs_blur", "e4dgs"]       # + the ablation's w/o AES: 5 jobs, 4 training folders
+METRICS = ("psnr", "ssim", "lpips", "iterations", "n_gaussians", "n_test_images", "channels", "config_hash")
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    import ray
+
+    ray.init(num_cpus=2, log_to_driver=False, include_dashboard=False)   # two single-CPU workers at a time
+    yield RayOptions(retries=2)
+    ray.shutdown()
+
+
+def _grid(scene: Path, long: dict | None = None) -> BenchConfig:
+    """All six cells (a preset must define them); the tests run a subset with `cells=`."""
+    cells = {"d3dgs_sharp": CellSpec("d3dgs", overrides={**TINY, "frames": "sharp", **(long or {})}),
+             "d3dgs_blur": CellSpec("d3dgs", overrides={**TINY, "frames": "strong"}),
+             "deblur_d3dgs": CellSpec("deblur_d3dgs", overrides={**TINY, "frames": "strong"}),
+             "e2vid_d3dgs": CellSpec("e2vid_d3dgs", overrides=TINY),
+             "e4dgs": CellSpec("e4dgs", overrides=TINY),
+             "e4dgs_rgb": CellSpec("e4dgs_rgb", overrides={**TINY, "rgb_frames": "strong"})}
+    return build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [scene.name], "cells": cells,
+                                      "ablation": {"scene": scene.name, "switches": {"w/o AES": {"events.aes": False}}},
+                                      "lpips_net": "alex"})
+
+
+def _metrics(rows):
+    out = {}
+    for r in rows:
+        out[r["key"]] = {k: r[k] for k in METRICS} | {"snapshots": [(s["iteration"], s["psnr"]) for s in r["snapshots"]]}
+    return out
+
+
+def test_tiny_grid_on_ray_gives_the_serial_numbers(motion_scene, tmp_path, local_ray):
+    cfg = _grid(motion_scene)
+    quiet = lambda s: None  # noqa: E731
+    import numba
+    import torch
+
+    # A 1-CPU Ray task trains on one torch and one numba thread; the serial run does the same here, since
+    # the CPU rasterizer sums per-thread gradient buffers (another thread count changes the last bits).
+    threads = torch.get_num_threads(), numba.get_num_threads()
+    torch.set_num_threads(1)
+    numba.set_num_threads(1)
+    try:
+        serial = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "serial", cells=GRID, progress=False, log=quiet)
+    finally:
+        torch.set_num_threads(threads[0])
+        numba.set_num_threads(threads[1])
+    t0 = time.time()
+    on_ray = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "ray", cells=GRID, progress=False, log=quiet,
+                       ray=local_ray)
+    assert time.time() - t0 < 300
+    assert len(serial) == 5 and {r["key"] for r in on_ray} == {r["key"] for r in serial}
+    assert _metrics(read_results(tmp_path / "ray" / "results.jsonl")) == _metrics(serial)   # identical numbers
+    assert all(r.get("status") != "failed" for r in on_ray)
+    # the ablation's full seed-0 run shares the main E-4DGS folder: trained once, by one task
+    logs = sorted(p.name for p in (tmp_path / "ray" / "logs").iterdir())
+    assert len(logs) == 4 and all("attempt started" in (tmp_path / "ray" / "logs" / n).read_text() for n in logs)
+    # a second run reuses every row and submits nothing
+    again = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "ray", cells=GRID, progress=False, log=quiet,
+                      ray=local_ray)
+    assert _metrics(again) == _metrics(on_ray)
+
+
+def test_a_worker_killed_mid_job_is_retried_and_every_row_arrives(motion_scene, tmp_path, local_ray):
+    cfg = _grid(motion_scene, long={"train.iterations": 400, "train.checkpoint_every": 10})
+    out = tmp_path / "runs"
+    result = {}
+    driver = threading.Thread(target=lambda: result.update(rows=run_bench(
+        cfg, "tiny", motion_scene.parent, out, cells=["d3dgs_sharp", "e4dgs"], studies=("main",), progress=False,
+        log=lambda s: None, ray=local_ray)))
+    driver.start()
+    killed = None
+    deadline = time.time() + 240
+    while killed is None and time.time() < deadline and driver.is_alive():
+        for lock in (out / motion_scene.name).glob(".d3dgs-*.lock") if (out / motion_scene.name).exists() else []:
+            run_dir = lock.with_name(lock.name[1:-len(".lock")])
+            pid = lock.read_text().strip()
+            if pid.isdigit() and int(pid) != os.getpid() and (run_dir / "checkpoint.pt").exists():
+                os.kill(int(pid), signal.SIGKILL)          # the Ray worker training this job dies mid-job
+                killed = (int(pid), run_dir)
+                break
+        time.sleep(0.05)
+    driver.join(timeout=300)
+    assert killed is not None, "never saw the D3DGS job mid-training"
+    assert not driver.is_alive()
+    rows = {r["key"]: r for r in result["rows"]}
+    assert set(rows) == {f"main/{motion_scene.name}/d3dgs_sharp", f"main/{motion_scene.name}/e4dgs"}
+    assert all(r.get("status") != "failed" for r in rows.values())
+    assert rows[f"main/{motion_scene.name}/d3dgs_sharp"]["iterations"] == 400
+    log = (out / "logs" / f"{motion_scene.name}__{killed[1].name}.log").read_text()
+    assert log.count("attempt started") == 2 and f"(pid {killed[0]})" in log   # the retry is a new worker
+    assert "resuming" in log.split("attempt started")[2]            # from the killed attempt's checkpoint
+
+
+def test_data_is_verified_on_the_worker_and_a_failing_job_is_reported_not_fatal(motion_scene, tmp_path, local_ray):
+    data = tmp_path / "data"
+    shutil.copytree(motion_scene, data / motion_scene.name)
+    cfg = _grid(motion_scene)
+    out = tmp_path / "runs"
+    quiet = lambda s: None  # noqa: E731
+    ok = run_bench(cfg, "tiny", data, out, cells=["d3dgs_sharp"], studies=("main",), progress=False, log=quiet,
+                   ray=local_ray)
+    assert [r["cell"] for r in ok] == ["d3dgs_sharp"]
+    h5 = next((data / motion_scene.name).rglob("*.h5"))
+    original = h5.read_bytes()
+    blob = bytearray(original)
+    blob[len(blob) // 2] ^= 0xFF                           # one flipped byte in an event file
+    h5.write_bytes(bytes(blob))
+    rows = run_bench(cfg, "tiny", data, out, cells=["e4dgs"], studies=("main",), progress=False, log=quiet,
+                     ray=RayOptions(retries=0))
+    by = {r["cell"]: r for r in rows}
+    assert by["d3dgs_sharp"].get("status") is None and by["d3dgs_sharp"]["psnr"] > 0   # earlier rows are kept
+    assert by["e4dgs"]["status"] == "failed" and h5.name in by["e4dgs"]["error"] and "SHA-256" in by["e4dgs"]["error"]
+    write_report(rows, out)
+    board = (out / "leaderboard.md").read_text()
+    assert "| E-4DGS (events) | failed |" in board and "### Failed jobs" in board
+    h5.write_bytes(original)
+    rows = run_bench(cfg, "tiny", data, out, cells=["e4dgs"], studies=("main",), progress=False, log=quiet,
+                     ray=local_ray)                        # repaired: the failed job runs again and succeeds
+    assert all(r.get("status") is None for r in rows) and {r["cell"] for r in rows} == {"d3dgs_sharp", "e4dgs"}
+
+
+def test_taskpool_reports_each_outcome_once_and_retries_failures(tmp_path, local_ray):
+    from common.argtypes import positive_int        # a package function: workers import it by name
+
+    seen = []
+    specs = [TaskSpec(f"t{x}", positive_int, (str(x),), log_path=tmp_path / f"t{x}.log") for x in (1, 2, 0, 3)]
+    outcomes = run_tasks(specs, RayOptions(retries=1), seen.append, progress=False)
+    assert sorted(o.key for o in seen) == ["t0", "t1", "t2", "t3"] and len(outcomes) == 4
+    by = {o.key: o for o in seen}
+    assert [by[f"t{x}"].value for x in (1, 2, 3)] == [1, 2, 3] and all(by[f"t{x}"].ok for x in (1, 2, 3))
+    assert not by["t0"].ok and by["t0"].error == "ArgumentTypeError: expected an integer >= 1, got '0'"
+    assert (tmp_path / "t0.log").read_text().count("attempt started") == 2      # one retry
+    assert "Traceback" in (tmp_path / "t0.log").read_text()                     # kept in the job's log
+    with pytest.raises(ValueError, match="unique"):
+        run_tasks(specs + specs[:1], RayOptions(), seen.append, progress=False)
+
+
+def test_dataset_through_ray_is_byte_identical_to_the_serial_one(motion_scene, tmp_path, local_ray):
+    from datagen.build import generate_dataset
+
+    failed = generate_dataset("tiny_motion", ["cubes"], tmp_path, log=lambda s: None, ray=local_ray)
+    assert failed == []
+    serial = json.loads((motion_scene / "manifest.json").read_text())["files"]
+    on_ray = json.loads((tmp_path / "cubes" / "manifest.json").read_text())["files"]
+    assert len(serial) > 10 and on_ray == serial                   # every file: same size and SHA-256
+    assert "attempt started" in (tmp_path / "logs" / "cubes.log").read_text()
+
+
+def test_serial_commands_never_import_ray():
+    code = ("import sys, e4dgs.cli, benchmark.runner, datagen.build, common.argtypes; "
+            "p = e4dgs.cli.build_parser(); p.parse_args(['bench', '--report']); "
+            "assert 'ray' not in sys.modules, 'ray imported'")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+
+
+def test_ray_options_are_range_checked(capsys):
+    from e4dgs.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "--ray", "--ray-retries", "-1"])
+    assert "--ray-retries" in capsys.readouterr().err
+    args = build_parser().parse_args(["dataset", "--ray", "--ray-cpus", "2"])
+    assert args.ray == "local" and args.ray_cpus == 2.0
+    assert build_parser().parse_args(["bench", "--ray", "auto"]).ray == "auto"
+    assert build_parser().parse_args(["bench"]).ray is None
+    with pytest.raises(ValueError, match="retries"):
+        RayOptions(retries=-1)
