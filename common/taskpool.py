@@ -185,7 +185,8 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                         outcome = TaskOutcome(spec.key, error=_one_line(exc))
                         failed += 1
                     outcomes.append(outcome)
-                    on_outcome(outcome)
+                    with tqdm.external_write_mode():          # the caller's log lines above the bar
+                        on_outcome(outcome)
                     bar.update(1)
                 started = ray.get(tracker.started_keys.remote())
                 running = sum(s.key in started for s in pending.values())

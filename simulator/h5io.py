@@ -51,7 +51,7 @@ class EventFileWriter:
     """
 
     def __init__(self, path: str | os.PathLike, width: int, height: int, t_offset_us: int = 0,
-                 attrs: Mapping[str, Any] | None = None, compression: str | None = "lzf"):
+                 attrs: Mapping[str, Any] | None = None, compression: str | None = "gzip"):
         self.path = Path(path)
         self.width, self.height, self.t_offset_us = int(width), int(height), int(t_offset_us)
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -59,11 +59,16 @@ class EventFileWriter:
         self._tmp = temp_path_for(self.path)
         self._file = h5py.File(self._tmp, "w")
         g = self._file.create_group("events")
-        kw = dict(maxshape=(None,), chunks=(_CHUNK,), compression=compression)
+        # Deterministic bytes: the same events always give the same file (datasets are compared by SHA-256
+        # across runs, workers and machines). gzip level 1 after a byte shuffle: deterministic, and on a
+        # quick scene's 1.9M events 4.1 MB against LZF's 7.9 MB, read in 0.05 s against 0.07 s (written
+        # in 0.15 s against 0.11 s). LZF's compressor hashes with an uninitialised table, so its output
+        # varied between runs. fill_time="alloc": the last chunk's unused tail is zeros, not stale memory.
+        gz = {"compression_opts": 1, "shuffle": True} if compression == "gzip" else {}
+        kw = dict(maxshape=(None,), chunks=(_CHUNK,), compression=compression, fillvalue=0, fill_time="alloc", **gz)
         self._ds = {name: g.create_dataset(name, shape=(0,), dtype=dt, **kw)
                     for name, dt in (("x", "<u2"), ("y", "<u2"), ("t", "<i8"), ("p", "u1"))}
-        self._ms = self._file.create_dataset("ms_to_idx", shape=(0,), dtype="<u8", maxshape=(None,),
-                                             chunks=(_CHUNK,), compression=compression)
+        self._ms = self._file.create_dataset("ms_to_idx", shape=(0,), dtype="<u8", **kw)
         self._file.create_dataset("t_offset", data=np.int64(self.t_offset_us))
         a = self._file.attrs
         a["width"], a["height"], a["format_version"] = self.width, self.height, FORMAT_VERSION
