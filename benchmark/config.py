@@ -62,6 +62,9 @@ class BenchConfig:
     cells: dict[str, CellSpec] = field(default_factory=dict)
     blur: BlurStudy = field(default_factory=BlurStudy)
     ablation: AblationStudy = field(default_factory=AblationStudy)
+    # per-scene changes to a cell, on top of its overrides and under a study's own, e.g. the budget that
+    # gives every cell the same training seconds on a slower scene: {scene: {cell: {dotted key: value}}}
+    scene_overrides: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     lpips_net: str = "vgg"
     snapshot_metrics: tuple[str, ...] = ("psnr", "ssim")    # at 10/25/50 % (the final model gets all)
     description: str = ""
@@ -75,6 +78,18 @@ class BenchConfig:
                 raise ConfigError(f"blur.cells: {c!r} is not a cell")
         if self.ablation.scene and self.ablation.base not in self.cells:
             raise ConfigError(f"ablation.base: {self.ablation.base!r} is not a cell")
+        for scene, per_cell in self.scene_overrides.items():
+            if scene not in self.scenes:
+                raise ConfigError(f"scene_overrides: {scene!r} is not one of the scenes ({', '.join(self.scenes)})")
+            for c, changes in per_cell.items():
+                if c not in self.cells:
+                    raise ConfigError(f"scene_overrides.{scene}: {c!r} is not a cell")
+                if not isinstance(changes, dict):
+                    raise ConfigError(f"scene_overrides.{scene}.{c}: expected a mapping of dotted keys to values")
+
+    def overrides(self, scene: str, cell: str) -> dict[str, Any]:
+        """A cell's overrides on one scene: the cell's own, then the scene's changes to it."""
+        return {**self.cells[cell].overrides, **self.scene_overrides.get(scene, {}).get(cell, {})}
 
 
 def load_bench(preset: str | Path) -> BenchConfig:
@@ -124,7 +139,7 @@ def jobs(cfg: BenchConfig) -> list[Job]:
     for scene in cfg.scenes:
         for name in MAIN_CELLS:
             c = cfg.cells[name]
-            out.append(Job("main", scene, name, "", c.method, c.config, dict(c.overrides)))
+            out.append(Job("main", scene, name, "", c.method, c.config, cfg.overrides(scene, name)))
     b = cfg.blur
     if b.scene:
         from recon.methods import get_method
@@ -135,7 +150,8 @@ def jobs(cfg: BenchConfig) -> list[Job]:
             for level in b.levels:
                 if key is None:      # the method never sees RGB frames: blur cannot change it
                     continue
-                out.append(Job("blur", b.scene, name, level, c.method, c.config, {**c.overrides, key: level}))
+                out.append(Job("blur", b.scene, name, level, c.method, c.config,
+                               {**cfg.overrides(b.scene, name), key: level}))
     a = cfg.ablation
     if a.scene:
         c = cfg.cells[a.base]
@@ -143,7 +159,7 @@ def jobs(cfg: BenchConfig) -> list[Job]:
             seeded = {"train.seed": seed} if seed != 0 else {}
             for variant, switch in [("full", {})] + list(a.switches.items()):
                 out.append(Job("ablation", a.scene, a.base, variant, c.method, c.config,
-                               {**c.overrides, **switch, **seeded}, seed))
+                               {**cfg.overrides(a.scene, a.base), **switch, **seeded}, seed))
     return out
 
 

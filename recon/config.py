@@ -119,6 +119,9 @@ class TrainConfig:
     """What every method's trainer shares: budget, schedule, checkpoints, evaluation."""
     iterations: int = 40_000
     scale_schedule: bool = True
+    # the budget the schedule's iteration counts below are written for; with scale_schedule they are
+    # scaled by iterations / schedule_reference (a recipe written for 750 iterations, run for 420)
+    schedule_reference: int = REFERENCE_ITERATIONS
     deform: bool = True               # false: a static 3DGS (no deformation field is ever applied)
     warm_up: int = 3000               # deformation off before this (reference iterations)
     position_lr_steps: int = 30_000
@@ -139,7 +142,7 @@ class TrainConfig:
     snapshots: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0)   # fractions of the budget saved as models
 
     def __post_init__(self):
-        check_positive(self, "iterations", "checkpoint_every")
+        check_positive(self, "iterations", "checkpoint_every", "schedule_reference")
         if not 0 <= self.sh_degree <= 3:
             raise ConfigError(f"sh_degree: expected 0..3, got {self.sh_degree!r}")
         if self.eval_every < 0 or self.eval_max_views < 0:
@@ -155,8 +158,9 @@ class TrainConfig:
             raise ConfigError(f"device: expected auto, cpu, cuda or cuda:N, got {self.device!r}")
 
     def scaled(self, v: int) -> int:
-        """An iteration count of the 40k reference schedule at this run's budget (>= 1)."""
-        s = self.iterations / REFERENCE_ITERATIONS if self.scale_schedule else 1.0
+        """An iteration count of the reference schedule (schedule_reference iterations, 40k by default)
+        at this run's budget (>= 1)."""
+        s = self.iterations / self.schedule_reference if self.scale_schedule else 1.0
         return max(1, int(round(v * s)))
 
     def schedule(self) -> Schedule:

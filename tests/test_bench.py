@@ -195,6 +195,25 @@ def test_ablation_seeds_vary_only_the_training_seed_and_seed_0_is_the_main_run()
         build_config(BenchConfig, {"scenes": ["s"], "cells": cells, "ablation": {"scene": "s", "seeds": [1, 1]}})
 
 
+def test_scene_overrides_change_one_cell_on_one_scene_in_every_study():
+    cells = {c: CellSpec("e4dgs" if c.startswith("e4dgs") else "d3dgs", overrides={"train.iterations": 300})
+             for c in MAIN_CELLS}
+    raw = {"scenes": ["a", "b"], "cells": cells, "blur": {"scene": "b", "cells": ["d3dgs_blur"]},
+           "ablation": {"scene": "b", "switches": {"w/o TV": {"events.lambda_tv": 0.0}}},
+           "scene_overrides": {"b": {"d3dgs_blur": {"train.iterations": 120}, "e4dgs": {"train.iterations": 90}}}}
+    by = {j.key: j for j in jobs(build_config(BenchConfig, raw))}
+    assert by["main/a/d3dgs_blur"].overrides == {"train.iterations": 300}           # other scenes untouched
+    assert by["main/b/d3dgs_blur"].overrides == {"train.iterations": 120}
+    assert by["main/b/d3dgs_sharp"].overrides == {"train.iterations": 300}         # other cells untouched
+    assert by["blur/b/d3dgs_blur/mild"].overrides == {"train.iterations": 120, "frames": "mild"}
+    assert by["ablation/b/e4dgs/w/o TV/seed0"].overrides == {"train.iterations": 90, "events.lambda_tv": 0.0}
+    assert by["ablation/b/e4dgs/full/seed0"].config_hash() == by["main/b/e4dgs"].config_hash()
+    with pytest.raises(ConfigError, match="scene_overrides: 'c'"):
+        build_config(BenchConfig, {**raw, "scene_overrides": {"c": {}}})
+    with pytest.raises(ConfigError, match="scene_overrides.b: 'd3dgs'"):
+        build_config(BenchConfig, {**raw, "scene_overrides": {"b": {"d3dgs": {}}}})
+
+
 def test_report_refuses_empty_results(tmp_path):
     with pytest.raises(ValueError, match="no results"):
         write_report([], tmp_path)

@@ -4,6 +4,7 @@ import math
 import pytest
 import torch
 
+from common.config import ConfigError
 from recon.config import (MIN_OPACITY_RESET_INTERVAL, MIN_WARM_UP, DensifyConfig, TrainConfig)
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
 from recon.gaussians import GaussianModel
@@ -93,3 +94,17 @@ def test_schedule_scales_with_the_budget_and_keeps_floors():
     assert tiny.warm_up == MIN_WARM_UP and tiny.densify_interval == 10
     fixed = TrainConfig(iterations=400, scale_schedule=False).schedule()
     assert fixed.warm_up == 3000 and fixed.densify_interval == 100
+
+
+def test_schedule_written_for_another_budget_scales_from_it():
+    recipe = dict(warm_up=300, position_lr_steps=750, deform_lr_steps=750, sh_interval=100,
+                  densify=DensifyConfig(start=50, stop=350, interval=25))
+    same = TrainConfig(iterations=750, schedule_reference=750, **recipe).schedule()
+    unscaled = TrainConfig(iterations=750, scale_schedule=False, **recipe).schedule()
+    assert same == unscaled                              # at its own budget the recipe is unchanged
+    cut = TrainConfig(iterations=420, schedule_reference=750, **recipe).schedule()
+    assert (cut.densify_start, cut.densify_stop, cut.densify_interval) == (28, 196, 14)   # x 0.56
+    assert (cut.position_lr_steps, cut.sh_interval) == (420, 56) and cut.warm_up == MIN_WARM_UP   # 168 < floor
+    assert TrainConfig(iterations=1500, schedule_reference=750, **recipe).schedule().warm_up == 600
+    with pytest.raises(ConfigError, match="schedule_reference"):
+        TrainConfig(schedule_reference=0)
