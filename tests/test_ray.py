@@ -195,3 +195,23 @@ def test_ray_options_are_range_checked(capsys):
     assert build_parser().parse_args(["bench"]).ray is None
     with pytest.raises(ValueError, match="retries"):
         RayOptions(retries=-1)
+
+
+def test_the_commands_take_ray(motion_scene, tmp_path, local_ray, capsys):
+    """`e4dgs dataset --ray` and `e4dgs bench --ray` end to end (through the module's local Ray)."""
+    import yaml
+
+    from e4dgs.cli import main
+
+    assert main(["dataset", "--preset", "tiny", "--out", str(tmp_path / "data"), "--ray"]) == 0
+    assert (tmp_path / "data" / "cubes" / "manifest.json").exists() and (tmp_path / "data" / "logs" / "cubes.log").exists()
+    preset = tmp_path / "grid.yaml"
+    preset.write_text(yaml.safe_dump({"dataset": "tiny_motion", "scenes": [motion_scene.name], "lpips_net": "alex",
+                                      "cells": {c: {"method": s.method, "overrides": s.overrides}
+                                                for c, s in _grid(motion_scene).cells.items()}}))
+    out = tmp_path / "runs"
+    assert main(["bench", "--preset", str(preset), "--data", str(motion_scene.parent), "--out", str(out),
+                 "--studies", "main", "--methods", "e4dgs", "--ray", "--ray-retries", "0", "--no-progress"]) == 0
+    rows = read_results(out / "results.jsonl")
+    assert [r["cell"] for r in rows] == ["e4dgs"] and rows[0]["psnr"] > 0
+    assert "E-4DGS (events)" in (out / "leaderboard.md").read_text()
