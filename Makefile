@@ -28,7 +28,7 @@ test: $(STAMP)
 dataset: $(STAMP)
 	$(VENV)/bin/e4dgs dataset --preset $(PRESET) $(if $(SCENES),--scenes $(SCENES)) --jobs $(JOBS) --out data/$(PRESET)
 
-# The leaderboard: `make benchmark` (quick preset, dataset included, < 1 h on 2 CPU cores),
+# The leaderboard: `make benchmark` (quick preset: ~64 min of jobs plus ~7 min of dataset on 2 CPU cores),
 # `make benchmark PRESET=paper`. Results and tables land in runs/<preset>/.
 benchmark: $(STAMP)
 	NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache $(VENV)/bin/e4dgs bench --preset $(PRESET) $(if $(SCENES),--scenes $(SCENES))
