@@ -47,14 +47,15 @@ def write_results(path: Path, rows: list[dict]) -> None:
     write_text_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows))
 
 
-def ensure_dataset(cfg: BenchConfig, data_root: Path, log: Callable[[str], None], ray=None) -> None:
-    missing = [s for s in cfg.scenes if not (data_root / s / "manifest.json").exists()]
+def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callable[[str], None], ray=None) -> None:
+    """Generate the scenes of dataset preset `dataset` that data_root lacks (skips complete ones)."""
+    missing = [s for s in scenes if not (data_root / s / "manifest.json").exists()]
     if not missing:
         return
     from datagen.build import generate_dataset
 
-    log(f"bench: generating dataset {cfg.dataset} for {', '.join(missing)} -> {data_root}")
-    failed = generate_dataset(cfg.dataset, missing, data_root, jobs=min(2, len(missing)), log=log, ray=ray)
+    log(f"bench: generating dataset {dataset} for {', '.join(missing)} -> {data_root}")
+    failed = generate_dataset(dataset, missing, data_root, jobs=min(2, len(missing)), log=log, ray=ray)
     if failed:
         raise RuntimeError(f"dataset generation failed for {', '.join(failed)} (run `e4dgs bench` again to resume)")
 
@@ -130,7 +131,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     needed = sorted({j.scene for j in todo})
     resolved = {j.key: resolve_job(j) for j in todo}   # every job's config, checked before any work
     t_start = time.time()
-    ensure_dataset(BenchConfig(**{**cfg.__dict__, "scenes": tuple(needed)}), data_root, log, ray)
+    ensure_dataset(cfg.dataset, needed, data_root, log, ray)
     dataset_s = time.time() - t_start
     out_root.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out_root / "bench.json", json.dumps({"preset": preset_name, **dump(cfg)}, indent=1))

@@ -214,6 +214,17 @@ def test_scene_overrides_change_one_cell_on_one_scene_in_every_study():
         build_config(BenchConfig, {**raw, "scene_overrides": {"b": {"d3dgs": {}}}})
 
 
+def test_a_scene_subset_runs_when_another_scene_has_overrides(motion_scene, tmp_path):
+    """`e4dgs bench --scenes hinge` on a preset whose scene_overrides name other scenes (the quick one)."""
+    cfg = _tiny_bench(motion_scene)
+    cfg = build_config(BenchConfig, {"dataset": cfg.dataset, "scenes": [motion_scene.name, "elsewhere"],
+                                     "cells": cfg.cells, "lpips_net": "alex",
+                                     "scene_overrides": {"elsewhere": {"e4dgs": {"train.iterations": 5}}}})
+    rows = run_bench(cfg, "tiny", motion_scene.parent, tmp_path, scenes=[motion_scene.name], cells=["e4dgs"],
+                     studies=("main",), progress=False, log=lambda s: None)
+    assert [(r["scene"], r["iterations"]) for r in rows] == [(motion_scene.name, 12)]
+
+
 def test_report_refuses_empty_results(tmp_path):
     with pytest.raises(ValueError, match="no results"):
         write_report([], tmp_path)
