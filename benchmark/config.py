@@ -81,11 +81,9 @@ class BenchConfig:
         for scene, per_cell in self.scene_overrides.items():
             if scene not in self.scenes:
                 raise ConfigError(f"scene_overrides: {scene!r} is not one of the scenes ({', '.join(self.scenes)})")
-            for c, changes in per_cell.items():
+            for c in per_cell:
                 if c not in self.cells:
                     raise ConfigError(f"scene_overrides.{scene}: {c!r} is not a cell")
-                if not isinstance(changes, dict):
-                    raise ConfigError(f"scene_overrides.{scene}.{c}: expected a mapping of dotted keys to values")
 
     def overrides(self, scene: str, cell: str) -> dict[str, Any]:
         """A cell's overrides on one scene: the cell's own, then the scene's changes to it."""
@@ -120,8 +118,16 @@ class Job:
         return "/".join(p for p in (self.study, self.scene, self.cell, self.variant, seed) if p)
 
     @property
-    def run_name(self) -> str:
-        return "_".join(p for p in (self.cell, self.variant.replace("/", "").replace(" ", "_")) if p)
+    def folder(self) -> str:
+        """Its training folder under the results root, '<scene>/<method>-<config hash>' (shared by jobs
+        that train the same thing)."""
+        return f"{self.scene}/{self.method}-{self.config_hash()}"
+
+    def identity(self) -> dict[str, Any]:
+        """The fields of its results row that say which job it is."""
+        return {"key": self.key, "study": self.study, "scene": self.scene, "cell": self.cell, "variant": self.variant,
+                "seed": self.seed, "method": self.method, "config": self.config, "overrides": self.overrides,
+                "config_hash": self.config_hash(), "run_dir": self.folder}
 
     def config_hash(self) -> str:
         payload = {"method": self.method, "overrides": self.overrides,

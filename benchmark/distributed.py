@@ -13,12 +13,12 @@ from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job
+from benchmark.runner import row_summary, run_job
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 
 
 def run_group(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path, method_cfgs: list) -> list[dict]:
     """On a worker: check the scene's files, then train (or resume) and score each job of one folder."""
-    from benchmark.runner import run_job
     from datagen.verify import verify_scene
 
     scene_dir = data_root / jobs[0].scene
@@ -29,12 +29,6 @@ def run_group(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path
     return [run_job(job, cfg, data_root, out_root, progress=False, method_cfg=mc) for job, mc in zip(jobs, method_cfgs)]
 
 
-def failed_row(job: Job, run_dir: str, error: str) -> dict:
-    return {"key": job.key, "study": job.study, "scene": job.scene, "cell": job.cell, "variant": job.variant,
-            "seed": job.seed, "method": job.method, "config": job.config, "overrides": job.overrides,
-            "config_hash": job.config_hash(), "run_dir": run_dir, "status": "failed", "error": error}
-
-
 def wants_gpu(method_cfg) -> bool:
     """Training asks for a GPU when its device may be CUDA (auto or cuda[:N])."""
     return str(method_cfg.train.device).split(":")[0] in ("auto", "cuda")
@@ -42,12 +36,13 @@ def wants_gpu(method_cfg) -> bool:
 
 def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root: Path, out_root: Path,
                     opts: RayOptions, record: Callable[[list[dict]], None], progress: bool = True,
-                    log: Callable[[str], None] = print) -> int:
-    """Run `todo` as Ray tasks, calling record(rows) on the driver as each task ends; returns failures."""
+                    log: Callable[[str], None] = print) -> None:
+    """Run `todo` as Ray tasks, calling record(rows) on the driver as each task ends (a task that failed
+    every attempt records rows with status "failed" and the error)."""
     data_root, out_root = Path(data_root).resolve(), Path(out_root).resolve()   # workers may run elsewhere
     groups: dict[str, list[Job]] = {}
     for job in todo:
-        groups.setdefault(f"{job.scene}/{job.method}-{job.config_hash()}", []).append(job)
+        groups.setdefault(job.folder, []).append(job)
     with ray_session(opts):
         gpus = cluster_gpus()
         specs = []
@@ -58,19 +53,14 @@ def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root
                                   log_path=out_root / "logs" / f"{run_dir.replace('/', '__')}.log"))
         log(f"bench: {len(todo)} job(s) as {len(specs)} Ray task(s), {opts.cpus_per_task:g} CPU each"
             f"{', one GPU per training task' if gpus else ''}; {opts.retries} retries; logs in {out_root / 'logs'}")
-        failures = 0
 
         def done(outcome: TaskOutcome) -> None:
-            nonlocal failures
             if outcome.ok:
                 record(outcome.value)
                 for row in outcome.value:
-                    log(f"bench {row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
-                        f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
+                    log(f"bench {row_summary(row)}")
             else:
-                failures += len(groups[outcome.key])
-                record([failed_row(j, outcome.key, outcome.error) for j in groups[outcome.key]])
+                record([{**j.identity(), "status": "failed", "error": outcome.error} for j in groups[outcome.key]])
                 log(f"bench {outcome.key}: FAILED after {opts.retries} retries: {outcome.error}")
 
         run_tasks(specs, opts, done, desc="bench", progress=progress)
-    return failures

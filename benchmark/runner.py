@@ -85,7 +85,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
 
     method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
     scene_dir = data_root / job.scene
-    run_dir = out_root / job.scene / f"{job.method}-{job.config_hash()}"
+    run_dir = out_root / job.folder
     t0 = time.time()
     model = fit(scene_dir, job.method, method_cfg, run_dir, progress=progress)
     train_elapsed = time.time() - t0
@@ -108,17 +108,18 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
-        "key": job.key, "study": job.study, "scene": job.scene, "cell": job.cell, "variant": job.variant,
-        "seed": job.seed,
-        "method": job.method, "config": job.config, "overrides": job.overrides, "config_hash": job.config_hash(),
-        "run_dir": str(run_dir.relative_to(out_root)),
-        **{k: final[k] for k in ("psnr", "ssim", "lpips")}, "n_test_images": final["n_images"],
+        **job.identity(), **{k: final[k] for k in ("psnr", "ssim", "lpips")}, "n_test_images": final["n_images"],
         "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
         "device": str(placement[0]), "backend": placement[1],
         "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),
         "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
         "versions": versions(), "git_commit": git_commit(), "lpips_net": cfg.lpips_net,
     }
+
+
+def row_summary(row: dict) -> str:
+    return (f"{row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} LPIPS {row['lpips']:.3f}, "
+            f"{row['wall_s']:.0f} s training")
 
 
 def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,
@@ -160,8 +161,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
             log(f"bench [{n}/{len(remaining)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
             row = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
             record([row])
-            log(f"bench [{n}/{len(remaining)}] {job.key}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} "
-                f"LPIPS {row['lpips']:.3f}, {row['wall_s']:.0f} s training")
+            log(f"bench [{n}/{len(remaining)}] {row_summary(row)}")
     log(f"bench {preset_name}: done in {time.time() - t_start:.0f} s ({dataset_s:.0f} s dataset, "
         f"{time.time() - t0:.0f} s jobs) -> {results_path}")
     return rows

@@ -7,7 +7,7 @@ bar (done / running / failed) and hands each outcome to a callback as it arrives
 record results as they come in and nothing finished is lost when a later job fails.
 
     specs = [TaskSpec("lego", generate_scene, ("quick", "lego", out), num_cpus=2, log_path=out / "logs/lego.log")]
-    run_tasks(specs, RayOptions(address=None), on_outcome=print)
+    run_tasks(specs, RayOptions(), on_outcome=print)
 
 Failures: a task that raises, or whose worker process dies, is retried `retries` times (Ray re-runs it,
 possibly on another node; our jobs resume from their checkpoints). After that its outcome carries the
@@ -29,7 +29,7 @@ LOCAL = "local"          # `--ray` without an address: start a Ray instance on t
 
 @dataclass(frozen=True)
 class RayOptions:
-    address: str | None = None         # None or "local": start Ray here; else a cluster address ("auto", "ray://host:10001")
+    address: str = LOCAL               # "local": start Ray here; else a cluster address ("auto", "ray://host:10001")
     retries: int = 2                   # re-runs after a failure or a dead worker, then the job is reported failed
     local_cpus: int | None = None      # CPUs of a locally started Ray (default: all of this machine's)
     cpus_per_task: float = 1.0         # CPUs each job asks for (its torch / numba threads)
@@ -137,7 +137,7 @@ def ray_session(opts: RayOptions):
         yield ray
         return
     kwargs = {"log_to_driver": False, "include_dashboard": False}
-    if opts.address in (None, LOCAL):
+    if opts.address == LOCAL:
         ray.init(num_cpus=opts.local_cpus or os.cpu_count(), **kwargs)
     else:
         ray.init(address=opts.address, **kwargs)
