@@ -118,3 +118,21 @@ def test_simulated_stream_round_trip_with_simulator_attributes(tmp_path, rng):
     path = write_events(tmp_path / "sim.h5", s, attrs={f"sim_{k}": v for k, v in cfg.__dict__.items()})
     assert np.array_equal(read_events(path).events, s.events)
     assert read_info(path)["sim_refractory_us"] == 50
+
+
+def test_the_same_events_give_the_same_bytes(tmp_path, rng):
+    """Datasets are compared by SHA-256 (serial vs Ray, run vs run): the file must be a function of the
+    events. Its filters are deterministic ones (gzip after a shuffle, not LZF, whose compressor reads an
+    uninitialised hash table) and the last chunk's unused tail is zero-filled, not stale memory."""
+    s = random_stream(rng, n=70_000)                     # more than one 65,536-event chunk
+    for name in ("a.h5", "b.h5"):
+        with EventFileWriter(tmp_path / name, s.width, s.height) as w:
+            for i in range(0, len(s), 9_999):             # appends that cut chunks mid-way
+                w.append(s.events[i:i + 9_999])
+            w.close()
+    assert (tmp_path / "a.h5").read_bytes() == (tmp_path / "b.h5").read_bytes()
+    with h5py.File(tmp_path / "a.h5") as f:
+        for name in ("events/x", "events/y", "events/t", "events/p", "ms_to_idx"):
+            d = f[name]
+            assert (d.compression, d.compression_opts, d.shuffle, d.fillvalue) == ("gzip", 1, True, 0), name
+            assert d.id.get_create_plist().get_fill_time() == h5py.h5d.FILL_TIME_ALLOC, name
