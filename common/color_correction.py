@@ -3,9 +3,15 @@ an offset on log intensity fitted by ordinary least squares to the ground truth.
 
 Events fix log intensity only up to an offset (and, with an unknown threshold, a scale), so before
 scoring, each channel's log-linear prediction L = log(linear(pred) + eps) is mapped to
-g * L + b with (g, b) minimising sum (g L + b - L_gt)^2 over the image's pixels, and re-encoded.
-A channel whose prediction is constant has no defined gain: then g = 1 and b = mean(L_gt - L)
-(the offset alone), so the correction is always defined.
+g * L + b with (g, b) minimising sum (g L + b - L_gt)^2 over the image's pixels subject to g >= 0,
+and re-encoded. A channel whose prediction is constant has no defined gain: then g = 1 and
+b = mean(L_gt - L) (the offset alone), so the correction is always defined.
+
+Why g >= 0: the gain stands for the unknown scale of the contrast thresholds, which is positive.
+Event polarity fixes the sign of every contrast, so a prediction whose log intensity is
+anti-correlated with the truth has its contrast inverted; an unconstrained fit (g < 0) would flip it
+back and score it as if it were right. The constrained optimum is then g = 0 (the prediction
+carries no usable contrast: the image becomes the ground truth's mean log intensity).
 """
 from __future__ import annotations
 
@@ -18,7 +24,8 @@ _MIN_VAR = 1e-12
 
 
 def fit_gain_offset(l_pred: np.ndarray, l_gt: np.ndarray) -> tuple[float, float]:
-    """OLS of l_gt ~ g l_pred + b over all elements; (1, mean difference) when l_pred is constant."""
+    """Least squares of l_gt ~ g l_pred + b over all elements with g >= 0: the OLS fit, or (0, mean
+    l_gt) when the OLS gain is negative; (1, mean difference) when l_pred is constant."""
     x = np.asarray(l_pred, np.float64).ravel()
     y = np.asarray(l_gt, np.float64).ravel()
     if x.size == 0:
@@ -28,6 +35,8 @@ def fit_gain_offset(l_pred: np.ndarray, l_gt: np.ndarray) -> tuple[float, float]
     if var < _MIN_VAR:
         return 1.0, float(ym - xm)
     g = float(np.mean((x - xm) * (y - ym)) / var)
+    if g < 0.0:   # the quadratic in g is convex, so the best g >= 0 is the boundary
+        return 0.0, float(ym)
     return g, float(ym - g * xm)
 
 

@@ -168,3 +168,24 @@ def test_color_correction_recovers_gain_and_offset_and_handles_constants(rng):
     assert fit_gain_offset(np.zeros(5), np.full(5, 2.0)) == (1.0, 2.0)
     out, _ = correct_colors(np.zeros((4, 4, 1), np.float32), np.zeros((4, 4, 1), np.float32))
     assert np.isfinite(out).all()
+
+
+def test_color_correction_never_inverts_contrast(rng):
+    """A contrast-inverted prediction (log intensity anti-correlated with the truth) is not flipped
+    back: the fitted gain is 0 and the corrected image is the truth's mean log intensity, scoring
+    no better than a flat image; a positively correlated one keeps its OLS fit."""
+    from common.color_correction import LOG_EPS
+    from simulator.pixel import linear_to_srgb, srgb_to_linear
+
+    gt = rng.uniform(0.05, 0.95, (12, 10, 1)).astype(np.float32)
+    lg = np.log(srgb_to_linear(gt) + LOG_EPS)
+    inverted = linear_to_srgb(np.exp(-lg - 4.0) - LOG_EPS).astype(np.float32)   # exact OLS gain: -1
+    out, params = correct_colors(inverted, gt)
+    assert params[0] == (0.0, pytest.approx(float(lg.mean())))
+    flat = linear_to_srgb(np.exp(np.full_like(lg, lg.mean())) - LOG_EPS)
+    np.testing.assert_allclose(out, np.clip(flat, 0, 1), atol=1e-6)
+    assert np.mean((out - gt) ** 2) > 1e-2            # the inverted image is not rescued
+    g, b = fit_gain_offset(np.arange(6.0), 2.0 * np.arange(6.0) + 1.0)
+    assert (g, b) == (pytest.approx(2.0), pytest.approx(1.0))
+    g, b = fit_gain_offset(np.arange(6.0), -0.5 * np.arange(6.0) + 3.0)          # OLS would give -0.5
+    assert (g, b) == (0.0, pytest.approx(np.mean(-0.5 * np.arange(6.0) + 3.0)))
