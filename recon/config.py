@@ -33,8 +33,11 @@ class InitConfig:
     auto volume carved by the cameras' event activity (recon.event_init): `carve_candidates` points
     of it are tested at `carve_times` instants, each against every camera's events within
     `carve_window` (a fraction of the clip), pixels active with >= `carve_min_events` events in
-    their 3x3 neighbourhood, grown by `carve_dilate_px`."""
+    their 3x3 neighbourhood, grown by `carve_dilate_px`. `color`: every point starts mid-grey (0.5,
+    as 3DGS without SfM colours), or the scene's empty-background colour, so that the initial model
+    renders no contrast at all and every contrast it ends with was learned (docs/e4dgs.md)."""
     kind: Literal["auto", "cube", "sphere", "points", "events"] = "auto"
+    color: Literal["mid", "background"] = "mid"
     n_points_object: int = 100_000
     n_points_room: int = 200_000
     cube_half_size: float | None = None
@@ -268,7 +271,10 @@ def _e4dgs_train() -> TrainConfig:
     # no opacity reset (paper); gradient threshold 3e-3: the event loss is in counts (1 / C_hat ~ 7x)
     # of log intensity (d log(linear) / d sRGB ~ 2-8x), so its view-space gradients are 15-40x the
     # photometric ones; at 1e-3 the tiny test scene grew 2k -> 24k Gaussians in 340 iterations
-    return TrainConfig(densify=DensifyConfig(opacity_reset=False, grad_threshold=3e-3))
+    # initial points in the background's colour: events fix every contrast's sign, so a start with
+    # contrast of its own (mid-grey on a darker background) must first be unlearned (docs/e4dgs.md)
+    return TrainConfig(densify=DensifyConfig(opacity_reset=False, grad_threshold=3e-3),
+                       init=InitConfig(color="background"))
 
 
 @dataclass(frozen=True)

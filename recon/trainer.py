@@ -122,13 +122,15 @@ class Trainer:
     def _new_model(self) -> DynamicGaussians:
         channels = self.method.channels()
         pts = initial_points(self.dataset, self.tcfg)
-        gaussians = GaussianModel.from_points(pts, sh_degree=self.tcfg.sh_degree, channels=channels,
-                                              init_opacity=self.tcfg.init.init_opacity)
-        torch.manual_seed(self.tcfg.seed)
-        deform = DeformationField()
         bg = list(self.tcfg.background) if self.tcfg.background is not None else scene_background(self.dataset, channels)
         if channels == 1 and len(bg) == 3:
             bg = [float(gray_from_srgb(np.asarray(bg)))]
+        colors = np.tile(np.asarray(bg, np.float32), (len(pts), 1)) \
+            if self.tcfg.init.color == "background" else None
+        gaussians = GaussianModel.from_points(pts, colors=colors, sh_degree=self.tcfg.sh_degree, channels=channels,
+                                              init_opacity=self.tcfg.init.init_opacity)
+        torch.manual_seed(self.tcfg.seed)
+        deform = DeformationField()
         meta = ModelMeta(method=self.method.name, channels=channels, sh_degree=self.tcfg.sh_degree, background=bg,
                          extent=self.extent, duration_us=self.dataset.duration_us,
                          deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.config.name,

@@ -7,6 +7,7 @@ import pytest
 import torch
 
 import recon
+from common.config import ConfigError
 from datagen.dataset import SceneDataset
 from recon.evaluate import evaluate_psnr
 from recon.methods.e4dgs import E4DGS, E4DGSRGB
@@ -81,8 +82,10 @@ def test_aes_switch_learns_or_freezes_the_threshold(motion_scene, tmp_path):
 def test_tv_switch_changes_the_loss_by_its_term(motion_scene, tmp_path):
     from recon import events as ev
 
-    with_tv = trainer_for(motion_scene, tmp_path / "tv", **{"events.ess": False})
-    no_tv = trainer_for(motion_scene, tmp_path / "notv", **{"events.ess": False, "events.lambda_tv": 0.0})
+    # mid-grey points: a background-coloured start renders no edges, so its TV would be 0
+    mid = {"events.ess": False, "train.init.color": "mid"}
+    with_tv = trainer_for(motion_scene, tmp_path / "tv", **mid)
+    no_tv = trainer_for(motion_scene, tmp_path / "notv", **mid, **{"events.lambda_tv": 0.0})
     no_tv.model = with_tv.model
     win = with_tv.method.sampler.sample(np.random.default_rng(1))
     a, renders = with_tv.method.event_loss(with_tv, [win])
@@ -215,3 +218,25 @@ def test_opacity_learning_rate_decays_to_its_final_value_only_when_set(motion_sc
         recon.resolve_config("e4dgs", overrides={"train.lr.opacity_final": 0.0})
     with pytest.raises(Exception, match="lr.feature"):
         recon.resolve_config("e4dgs", overrides={"train.lr.feature": -1.0})
+
+
+def test_init_color_background_starts_without_any_contrast(motion_scene, tmp_path):
+    """init.color: background (E-4DGS's default) gives every initial Gaussian the empty background's
+    colour, so the untrained model renders the background exactly (no contrast to unlearn);
+    mid-grey does not."""
+    ds = SceneDataset(motion_scene)
+    assert recon.resolve_config("e4dgs").train.init.color == "background"
+    assert recon.resolve_config("d3dgs").train.init.color == "mid"
+    for method in ("e4dgs", "e4dgs_rgb"):
+        bg_tr = trainer_for(motion_scene, tmp_path / f"bg_{method}", method, **{"train.init.color": "background"})
+        mid_tr = trainer_for(motion_scene, tmp_path / f"mid_{method}", method, **{"train.init.color": "mid"})
+        cam = dataset_camera(ds, 0, ds.duration_us // 2)
+        with torch.no_grad():
+            bg_img = bg_tr.model.render(cam, 0.5)
+            mid_img = mid_tr.model.render(cam, 0.5)
+        background = bg_tr.model.background
+        assert bg_img.shape[-1] == len(background) == (1 if method == "e4dgs" else 3)
+        torch.testing.assert_close(bg_img, background.expand_as(bg_img), atol=1e-5, rtol=0)
+        assert (mid_img - background).abs().max() > 0.05          # the grey points show against it
+    with pytest.raises(ConfigError, match="color"):
+        recon.resolve_config("e4dgs", overrides={"train.init.color": "white"})
