@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+import sys
 import time
 import traceback
 from dataclasses import dataclass
@@ -73,15 +74,30 @@ def _import_ray():
 
 
 def limit_threads(n: int) -> None:
-    """Keep a task to its n CPUs: torch's and numba's thread pools here, and child processes' via the
-    environment. (Ray sets OMP_NUM_THREADS alone; numba would still start one thread per core, and
-    two tasks sharing a core each collapse, measured 2.6x slower on this project's 2-core machine.)"""
-    os.environ["OMP_NUM_THREADS"] = os.environ["NUMBA_NUM_THREADS"] = str(n)
+    """Keep a task to its n CPUs: torch's and numba's thread pools here, and child processes' via
+    OMP_NUM_THREADS (child_env gives them NUMBA_NUM_THREADS too). (Ray sets OMP_NUM_THREADS alone;
+    numba would still start one thread per core, and two tasks sharing a core each collapse, measured
+    2.6x slower on this project's 2-core machine.)
+
+    NUMBA_NUM_THREADS is set in this process only while numba is not imported yet: numba re-reads
+    the environment at every compilation and refuses a pool size other than the one it launched
+    with, so changing it afterwards made every job on a fresh numba cache fail."""
+    os.environ["OMP_NUM_THREADS"] = str(n)
+    if "numba" not in sys.modules:
+        os.environ["NUMBA_NUM_THREADS"] = str(n)
     import numba
     import torch
 
     torch.set_num_threads(n)
     numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+
+
+def child_env() -> dict[str, str]:
+    """The environment for a task's child process: numba's pool sized like OMP_NUM_THREADS."""
+    env = dict(os.environ)
+    if "OMP_NUM_THREADS" in env:
+        env["NUMBA_NUM_THREADS"] = env["OMP_NUM_THREADS"]
+    return env
 
 
 def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | None, tracker=None,

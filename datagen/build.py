@@ -38,8 +38,10 @@ def _worker_cmd(preset: str | Path, scene: str, out: Path, checkpoint_every: int
 
 def generate_scene_task(preset: str | Path, scene: str, out: Path, checkpoint_every: int) -> str:
     """A Ray task: one scene's worker process, its output into the task's log; raises if it fails."""
+    from common.taskpool import child_env
+
     proc = subprocess.run(_worker_cmd(preset, scene, out, checkpoint_every) + ["--no-progress"],
-                          stdout=sys.stdout, stderr=sys.stderr)
+                          stdout=sys.stdout, stderr=sys.stderr, env=child_env())
     if proc.returncode != 0:
         raise RuntimeError(f"scene {scene}: worker exited with status {proc.returncode}")
     return scene

@@ -8,6 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from pathlib import Path
@@ -215,3 +216,38 @@ def test_the_commands_take_ray(motion_scene, tmp_path, local_ray, capsys):
     rows = read_results(out / "results.jsonl")
     assert [r["cell"] for r in rows] == ["e4dgs"] and rows[0]["psnr"] > 0
     assert "E-4DGS (events)" in (out / "leaderboard.md").read_text()
+
+
+def test_limit_threads_leaves_numba_able_to_compile():
+    """A worker whose numba pool already runs (a 2-thread pool) is limited to 1 thread and must
+    still compile new kernels: numba re-reads NUMBA_NUM_THREADS at every compilation and refuses a
+    changed value, which failed every bench job on a fresh numba cache. A task's child processes
+    get the limit through child_env."""
+    code = textwrap.dedent("""
+        import numpy as np, numba
+        from numba import njit, prange
+
+        @njit(parallel=True)
+        def total(x):
+            s = 0.0
+            for i in prange(x.shape[0]):
+                s += x[i]
+            return s
+
+        assert total(np.ones(8)) == 8.0                  # launches the pool at 2 threads
+        from common.taskpool import child_env, limit_threads
+        limit_threads(1)
+
+        @njit
+        def plus_one(v):
+            return v + 1
+
+        assert plus_one(1) == 2                          # a compilation after the limit
+        assert numba.get_num_threads() == 1
+        assert child_env()["NUMBA_NUM_THREADS"] == "1"
+        print("ok")
+    """)
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS",)}
+    env["NUMBA_NUM_THREADS"] = "2"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
