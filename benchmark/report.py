@@ -101,7 +101,7 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> 
                    + ["" if t is None else f"{t:.1f}", "" if g is None else f"{g:.0f}"])
     md.write("\nBest per column in **bold**, second <u>underlined</u>. PSNR/SSIM/LPIPS are means of per-image "
              "values over each scene's held-out views; events-only methods (E-4DGS, E2VID + D3DGS) are scored "
-             "against grayscale ground truth after their log-intensity gain/offset correction, RGB methods "
+             "against grayscale ground truth after their log-intensity gain (>= 0) / offset correction, RGB methods "
              "against RGB. Train time: training-only wall-clock seconds, mean over scenes.\n")
     if len(scenes) > 1:
         md.write("\n### Per scene\n\n| Scene | Method | PSNR↑ | SSIM↑ | LPIPS↓ | Iterations | Train (s) | Gaussians |\n"

@@ -16,11 +16,12 @@ from recon.views import dataset_camera
 
 SMALL = {"train.init.n_points_object": 2000, "train.deform_bf16": True, "train.lr.feature": 0.01,
          "train.snapshots": [1.0], "train.checkpoint_every": 5000}
-TRAIN_ITERS = 1000   # with densification off to stay fast (measured: 26.96 dB at 1,000, 27.36 at 1,500)
-# stated target: held-out PSNR after colour correction (an untrained model scores ~25.1 dB here,
-# the flat background after correction); measured in docs/e4dgs.md
-HELD_OUT_PSNR_MIN = 26.5
-OVER_UNTRAINED_DB = 1.0
+TRAIN_ITERS = 1000   # with densification off to stay fast: ~50 s on 2 cores
+# stated target: held-out PSNR after colour correction (gain >= 0). Measured: the untrained model
+# (points in the background's colour, a flat image after correction) 25.05 dB, 27.92 after 1,000
+# iterations (26.96 when points started mid-grey)
+HELD_OUT_PSNR_MIN = 27.0
+OVER_UNTRAINED_DB = 2.0
 
 
 def trainer_for(scene, tmp_path, method="e4dgs", **overrides):
