@@ -29,9 +29,9 @@ dataset: $(STAMP)
 	$(VENV)/bin/e4dgs dataset --preset $(PRESET) $(if $(SCENES),--scenes $(SCENES)) --jobs $(JOBS) --out data/$(PRESET)
 
 # The leaderboard: `make benchmark`, `make benchmark PRESET=paper`. Results and tables land in
-# runs/<preset>/. Jobs run as one-thread tasks on a Ray started on this machine, one per core (on
-# 2 cores, 1.5x the throughput of one 2-thread job at a time); `make benchmark RAY=` runs them one
-# at a time in this process, `RAY="--ray auto"` joins a running cluster.
+# runs/<preset>/. Jobs run as one-thread tasks on a Ray started on this machine, one per core (the
+# quick preset's 33 jobs: 47 min on 2 cores, against 63.5 min one 2-thread job at a time);
+# `make benchmark RAY=` runs them one at a time in this process, `RAY="--ray auto"` joins a cluster.
 RAY ?= --ray
 benchmark: $(STAMP)
 	NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache $(VENV)/bin/e4dgs bench --preset $(PRESET) $(RAY) $(if $(SCENES),--scenes $(SCENES))
