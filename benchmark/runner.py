@@ -108,7 +108,8 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
-        **job.identity(), **{k: final[k] for k in ("psnr", "ssim", "lpips")}, "n_test_images": final["n_images"],
+        **job.identity(), **{k: final[k] for k in ("psnr", "psnr_luma", "ssim", "lpips")},
+        "n_test_images": final["n_images"],
         "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
         "device": str(placement[0]), "backend": placement[1],
         "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),

@@ -282,17 +282,20 @@ class E4DGSConfig:
     """E-4DGS. `e4dgs`: events only (grayscale model). `e4dgs_rgb`: events + the blurred RGB frames of
     `rgb_frames` (colour model), L = L_event + lambda_rgb L_RGB. A blurred frame is predicted as the
     mean, in linear light, of `rgb_samples` renders spread over its exposure (`rgb_render: mean`), or
-    as one render at the exposure centre (`rgb_render: centre`)."""
+    as one render at the exposure centre (`rgb_render: centre`). With `rgb_every` N > 1 the RGB term
+    joins every N-th step only (iterations N, 2N, ...), so the other steps cost what an events-only
+    step costs; its weight stays lambda_rgb."""
     events: EventConfig = field(default_factory=EventConfig)
     rgb_frames: str = "medium"
     lambda_rgb: float = 1.0
+    rgb_every: int = 1
     lambda_dssim: float = 0.2
     rgb_render: Literal["mean", "centre"] = "mean"
     rgb_samples: int = 3
     train: TrainConfig = field(default_factory=_e4dgs_train)
 
     def __post_init__(self):
-        check_positive(self, "rgb_samples")
+        check_positive(self, "rgb_samples", "rgb_every")
 
 
 @dataclass(frozen=True)

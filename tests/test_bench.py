@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from benchmark.config import MAIN_CELLS, BenchConfig, CellSpec, jobs, load_bench
+from benchmark.config import LABELS, MAIN_CELLS, BenchConfig, CellSpec, jobs, load_bench
 from common.metrics.image import psnr, score_pairs, ssim
 from benchmark.report import write_report
 from benchmark.runner import read_results, run_bench
@@ -33,6 +33,21 @@ def test_psnr_analytic():
     b = a + 0.1            # MSE 0.01 -> 20 dB
     assert psnr(b, a) == pytest.approx(20.0, abs=1e-9)
     assert score_pairs([(a, a), (b, a)], lpips_net=None)["psnr"] == pytest.approx((100 + 20) / 2)
+
+
+def test_luma_psnr_ignores_chroma_and_equals_psnr_on_gray():
+    from common.color import linear_to_srgb, srgb_to_linear
+    from common.metrics.image import luma
+
+    gt = np.full((16, 16, 3), 0.2)                                # linear light
+    d = 0.005                                                     # shift R up, B down at equal luminance
+    pred = gt + np.array([d / 0.2126, 0.0, -d / 0.0722])
+    s = score_pairs([(linear_to_srgb(pred), linear_to_srgb(gt))], lpips_net=None)
+    assert s["psnr"] < 40 and s["psnr_luma"] == pytest.approx(100.0)   # a chroma error, no luma error
+    assert np.allclose(srgb_to_linear(luma(linear_to_srgb(gt)))[..., 0], 0.2)
+    a = np.full((16, 16, 1), 0.5)
+    g = score_pairs([(a + 0.1, a)], lpips_net=None)                 # gray: the same number
+    assert g["psnr_luma"] == g["psnr"] == pytest.approx(20.0)
 
 
 def test_psnr_is_per_image_then_averaged():
@@ -132,8 +147,10 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
     assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"blur/{motion_scene.name}/deblur_d3dgs/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES/seed0" in keys
     assert not any(k.startswith("blur/") and "/e4dgs/" in k for k in keys)   # events-only: blur cannot matter
     for r in rows:
-        assert r["iterations"] == 12 and np.isfinite([r["psnr"], r["ssim"], r["lpips"]]).all()
+        assert r["iterations"] == 12 and np.isfinite([r["psnr"], r["ssim"], r["lpips"], r["psnr_luma"]]).all()
         assert r["channels"] == (1 if r["method"] in ("e4dgs", "e2vid_d3dgs") else 3)
+        if r["channels"] == 1:                                   # gray methods: luma is their own score
+            assert r["psnr_luma"] == pytest.approx(r["psnr"])
         assert [s["iteration"] for s in r["snapshots"]] == [6, 12] and r["versions"]["torch"]
     paths = write_report(rows, out)
     assert (out / "leaderboard.md").exists() and (out / "accuracy_vs_time.png").stat().st_size > 1000
@@ -153,7 +170,8 @@ def test_report_from_stored_results(tmp_path):
     rows = []
     for scene, base in (("a", 20.0), ("b", 22.0)):
         for k, cell in enumerate(MAIN_CELLS):
-            rows.append(_row("main", scene, cell, base + k, lpips_v=0.5 - 0.1 * k))
+            rows.append({**_row("main", scene, cell, base + k, lpips_v=0.5 - 0.1 * k), "psnr_luma": 40.0 - k - base})
+    del rows[0]["psnr_luma"]                                     # a row recorded before the luma score
     rows += [_row("blur", "a", "d3dgs_blur", 19.0, "mild"), _row("blur", "a", "d3dgs_blur", 17.0, "strong"),
              _row("ablation", "a", "e4dgs", 22.0, "full", seed=0), _row("ablation", "a", "e4dgs", 24.0, "full", seed=1),
              _row("ablation", "a", "e4dgs", 21.0, "w/o TV", seed=0), _row("ablation", "a", "e4dgs", 22.0, "w/o TV", seed=1)]
@@ -164,6 +182,10 @@ def test_report_from_stored_results(tmp_path):
     assert "**25.00**" in line and "**27.00**" in line and "**26.00**" in line   # best PSNR: a, b, average
     second = next(l for l in md.splitlines() if l.startswith("| E-4DGS (events) |"))
     assert "<u>24.00</u>" in second and "<u>0.100</u>" in second
+    luma = md.split("### The same target")[1]
+    first = next(l for l in luma.splitlines() if l.startswith(f"| {LABELS[MAIN_CELLS[0]]} |"))
+    assert first == f"| {LABELS[MAIN_CELLS[0]]} | – | **18.00** | – |"      # no luma for a: no average
+    assert f"| {LABELS[MAIN_CELLS[1]]} | **19.00** | <u>17.00</u> | **18.00** |" in luma
     board = json.loads((tmp_path / "leaderboard.json").read_text())
     assert board["e4dgs_rgb"]["average"]["psnr"] == pytest.approx(26.0) and set(board["e4dgs"]["scenes"]) == {"a", "b"}
     csv_lines = (tmp_path / "leaderboard.csv").read_text().splitlines()

@@ -139,6 +139,12 @@ def test_rgb_variant_renders_blur_as_the_mean_over_the_exposure(motion_scene, tm
     assert view.times[-1] == pytest.approx(rec.exposure_us[1] / tr.dataset.duration_us)
     loss, renders = tr.method.step(tr, 1)
     assert len(renders) == 2 + 4 and math.isfinite(loss.item())
+    # rgb_every 3: the blurred frame joins iterations 3, 6, ... only; the others are events-only steps
+    every = trainer_for(motion_scene, tmp_path / "e", "e4dgs_rgb", **{"rgb_frames": "strong", "rgb_samples": 4,
+                                                                      "rgb_every": 3})
+    assert [len(every.method.step(every, it)[1]) for it in (1, 2, 3, 4, 6)] == [2, 2, 6, 2, 6]
+    with pytest.raises(ConfigError, match="rgb_every"):
+        recon.resolve_config("e4dgs_rgb", overrides={"rgb_every": 0})
     centre = trainer_for(motion_scene, tmp_path / "c", "e4dgs_rgb", **{"rgb_frames": "strong", "rgb_render": "centre"})
     assert len(centre.method.blur_views[0].cameras) == 1
     assert centre.method.blur_views[0].times[0] == pytest.approx(rec.time, abs=1e-4)

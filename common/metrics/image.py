@@ -12,6 +12,7 @@ from typing import Iterable
 import numpy as np
 from skimage.metrics import structural_similarity
 
+from common.color import linear_to_srgb, rec709_luma, srgb_to_linear
 from common.metrics import psnr
 
 
@@ -28,12 +29,23 @@ def ssim(pred: np.ndarray, ref: np.ndarray) -> float:
                                        channel_axis=-1 if p.ndim == 3 else None))
 
 
+def luma(image: np.ndarray) -> np.ndarray:
+    """[H, W, 3] sRGB-encoded -> [H, W, 1] sRGB-encoded Rec.709 luma of its linear light (how the
+    dataset's gray/ frames are made); a single-channel image [H, W(, 1)] is returned as it is."""
+    if image.ndim == 3 and image.shape[-1] == 3:
+        return linear_to_srgb(rec709_luma(srgb_to_linear(image)))[..., None]
+    return image
+
+
 def score_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str | None = "vgg") -> dict[str, float]:
-    """Mean PSNR / SSIM (/ LPIPS) over (prediction, ground truth) pairs; inf PSNRs are capped at 100 dB."""
+    """Mean PSNR / SSIM (/ LPIPS) over (prediction, ground truth) pairs; inf PSNRs are capped at 100 dB.
+    `psnr_luma` is the PSNR of both images' luma: the target events-only methods are scored on, so
+    colour and grayscale methods can be compared on the same quantity (equal to `psnr` for gray)."""
     pairs = list(pairs)
     if not pairs:
         raise ValueError("score_pairs: no image pairs")
     out = {"psnr": float(np.mean([min(psnr(p, r), 100.0) for p, r in pairs])),
+           "psnr_luma": float(np.mean([min(psnr(luma(p), luma(r)), 100.0) for p, r in pairs])),
            "ssim": float(np.mean([ssim(p, r) for p, r in pairs])),
            "n_images": len(pairs)}
     if lpips_net:

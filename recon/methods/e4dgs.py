@@ -12,7 +12,7 @@ read from the event files), so L_hat is the quantity the events measure. Each st
    deformation field runs once per end point for every camera);
 3. AES: N_pred = (L_hat(t_end) - L_hat(t_start)) / C_hat with a learnable C_hat = exp(log_c);
 4. L = mean over the cameras of 1.0 L_recon + 0.005 TV(render at t_end) [+ 1.0 (L1 + D-SSIM) on a
-   blurred frame].
+   blurred frame, on every `rgb_every`-th step].
 
 IIP prunes by importance (the rasterizer's max alpha x transmittance over the training cameras at
 `iip_times` timestamps); there is no opacity reset. Test views are scored after per-image colour
@@ -167,7 +167,7 @@ class E4DGS(Method):
         windows = [self.sampler.sample(trainer.rng)] if e.views_per_step == 1 else \
             self.sampler.sample_views(trainer.rng, e.views_per_step)
         loss, renders = self.event_loss(trainer, windows)
-        if self.uses_rgb and self.cfg.lambda_rgb > 0:
+        if self.uses_rgb and self.cfg.lambda_rgb > 0 and iteration % self.cfg.rgb_every == 0:
             l_rgb, more = self.rgb_loss(trainer)
             loss, renders = loss + self.cfg.lambda_rgb * l_rgb, renders + more
         for out, _ in renders:
