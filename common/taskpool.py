@@ -206,5 +206,7 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                     bar.update(1)
                 started = ray.get(tracker.started_keys.remote())
                 running = sum(s.key in started for s in pending.values())
-                bar.set_postfix_str(f"done {len(outcomes) - failed}, running {running}, failed {failed}")
+                status = f"done {len(outcomes) - failed}, running {running}, failed {failed}"
+                if status != getattr(bar, "postfix", None):   # redraw on a change only: a log gets a line
+                    bar.set_postfix_str(status)                # per change, not one per second of polling
     return outcomes

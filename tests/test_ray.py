@@ -165,6 +165,17 @@ def test_taskpool_reports_each_outcome_once_and_retries_failures(tmp_path, local
         run_tasks(specs + specs[:1], RayOptions(), seen.append, progress=False)
 
 
+def test_taskpool_bar_redraws_on_a_change_not_every_poll(tmp_path, local_ray, capsys):
+    """A 6-s task polled every second: its status line is drawn when it changes (and around the
+    outcome's log line), so a job log (stderr not a terminal) is not filled with one bar per second."""
+    outcomes = run_tasks([TaskSpec("nap", time.sleep, (6.0,), log_path=tmp_path / "nap.log")], RayOptions(),
+                         lambda o: None, progress=True)
+    assert outcomes[0].ok
+    draws = capsys.readouterr().err.split("\r")
+    while_running = [d for d in draws if "0/1 [" in d and "running 1," in d]
+    assert 1 <= len(while_running) <= 2    # the change, and the redraw around the outcome's log line
+
+
 def test_dataset_through_ray_is_byte_identical_to_the_serial_one(motion_scene, tmp_path, local_ray):
     from datagen.build import generate_dataset
 
