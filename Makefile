@@ -30,7 +30,7 @@ dataset: $(STAMP)
 
 # The leaderboard: `make benchmark`, `make benchmark PRESET=paper`. Results and tables land in
 # runs/<preset>/. Jobs run as one-thread tasks on a Ray started on this machine, one per core (the
-# quick preset's 33 jobs: 47 min on 2 cores, against 63.5 min one 2-thread job at a time);
+# quick preset's 29 jobs: 47-50 min on 2 cores, against 63.5 min one 2-thread job at a time);
 # `make benchmark RAY=` runs them one at a time in this process, `RAY="--ray auto"` joins a cluster.
 RAY ?= --ray
 benchmark: $(STAMP)
