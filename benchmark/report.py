@@ -51,8 +51,9 @@ def main_table(rows: list[dict]) -> tuple[list[str], dict[str, dict[str, dict]]]
 
 
 def _average(table, cell, scenes, key):
-    vals = [table[cell][s][key] for s in scenes if s in table[cell]]
-    return sum(vals) / len(vals) if len(vals) == len(scenes) and vals else None
+    """Mean of `key` over the scenes, or None unless every scene has a row with a value for it."""
+    vals = [table[cell][s].get(key) for s in scenes if s in table[cell]]
+    return sum(vals) / len(vals) if len(vals) == len(scenes) and vals and None not in vals else None
 
 
 def is_failed(row: dict) -> bool:
@@ -122,8 +123,7 @@ def luma_table(scenes: list[str], table, cells: list[str]) -> str:
     prediction's luma against the truth's, after the method's own correction): the main table
     scores colour methods on RGB, a harder target, so its columns mix two quantities."""
     values = {s: {c: table[c][s].get("psnr_luma") if s in table[c] else None for c in cells} for s in scenes}
-    values["average"] = {c: (sum(values[s][c] for s in scenes) / len(scenes)
-                             if all(values[s][c] is not None for s in scenes) else None) for c in cells}
+    values["average"] = {c: _average(table, c, scenes, "psnr_luma") for c in cells}
     ranks = {col: _rank_marks(values[col], higher=True) for col in values}
     md = io.StringIO()
     md.write("\n### The same target for every method: PSNR of the luma\n\n| Method | "

@@ -23,3 +23,9 @@ def linear_to_srgb(v: np.ndarray) -> np.ndarray:
     """Linear light -> sRGB-encoded values, clipped to [0,1]."""
     v = np.clip(np.asarray(v, dtype=np.float64), 0.0, 1.0)
     return np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+def srgb_luma(rgb: np.ndarray) -> np.ndarray:
+    """sRGB-encoded [..., 3] -> sRGB-encoded [...] Rec.709 luma of its linear light (how the dataset's
+    gray/ frames are made)."""
+    return linear_to_srgb(rec709_luma(srgb_to_linear(rgb)))

@@ -10,12 +10,12 @@ import torch
 from datagen.dataset import DatasetError, FrameRecord, SceneDataset
 from recon.raster import Camera
 from recon.render import camera_from_pose
-from simulator.pixel import linear_to_srgb, rec709_luma, srgb_to_linear
+from common.color import srgb_luma
 
 
 def gray_from_srgb(rgb: np.ndarray) -> np.ndarray:
     """[..., 3] sRGB in [0, 1] -> [...] sRGB-encoded luma of the linear light (how gray/ frames are made)."""
-    return linear_to_srgb(rec709_luma(srgb_to_linear(rgb))).astype(np.float32)
+    return srgb_luma(rgb).astype(np.float32)
 
 
 def dataset_camera(dataset: SceneDataset, camera: int, t_us) -> Camera:

@@ -12,7 +12,7 @@ from typing import Iterable
 import numpy as np
 from skimage.metrics import structural_similarity
 
-from common.color import linear_to_srgb, rec709_luma, srgb_to_linear
+from common.color import srgb_luma
 from common.metrics import psnr
 
 
@@ -33,7 +33,7 @@ def luma(image: np.ndarray) -> np.ndarray:
     """[H, W, 3] sRGB-encoded -> [H, W, 1] sRGB-encoded Rec.709 luma of its linear light (how the
     dataset's gray/ frames are made); a single-channel image [H, W(, 1)] is returned as it is."""
     if image.ndim == 3 and image.shape[-1] == 3:
-        return linear_to_srgb(rec709_luma(srgb_to_linear(image)))[..., None]
+        return srgb_luma(image)[..., None]
     return image
 
 
