@@ -3,9 +3,10 @@
 Jobs that share a training folder (the ablation's full seed-0 run is the main E-4DGS cell) form one
 task, so two workers never train into the same folder. A task verifies its scene against the
 manifest on the worker (sizes and SHA-256: the data path must show every node the same files),
-trains or resumes, scores, and returns the rows; only the driver writes results.jsonl, once per
-finished task. A task that still fails after its retries becomes a row with status "failed" (the
-leaderboard names it); a later `e4dgs bench` runs it again.
+trains or resumes, scores once and returns the rows (the folder's other jobs reuse the scores);
+only the driver writes results.jsonl, once per finished task. A task that still fails after its
+retries becomes a row with status "failed" (the leaderboard names it); a later `e4dgs bench` runs
+it again.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job
-from benchmark.runner import row_summary, run_job
+from benchmark.runner import row_summary, run_folder
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 
 
@@ -26,7 +27,7 @@ def run_group(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path
     if problems:
         raise ValueError(f"{scene_dir} on this node does not match its manifest: {problems[0]}"
                          + (f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""))
-    return [run_job(job, cfg, data_root, out_root, progress=False, method_cfg=mc) for job, mc in zip(jobs, method_cfgs)]
+    return run_folder(jobs, cfg, data_root, out_root, False, method_cfgs)
 
 
 def wants_gpu(method_cfg) -> bool:

@@ -118,6 +118,20 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     }
 
 
+def reused_row(job: Job, row: dict) -> dict:
+    """The results row of `job` taken from `row`, a finished job with the same training folder: the
+    same config hash, so the same model and the same scores (the blur study's level of the main
+    cells, the ablation's full seed-0 run). Nothing is trained or scored twice."""
+    return {**row, **job.identity(), "train_elapsed_s": 0.0, "eval_s": 0.0, "scored_as": row["key"]}
+
+
+def run_folder(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool,
+               method_cfgs: list) -> list[dict]:
+    """Train and score the first of `jobs` (which share one training folder); the rest reuse its row."""
+    first = run_job(jobs[0], cfg, data_root, out_root, progress, method_cfg=method_cfgs[0])
+    return [first] + [reused_row(job, first) for job in jobs[1:]]
+
+
 def row_summary(row: dict) -> str:
     return (f"{row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} LPIPS {row['lpips']:.3f}, "
             f"{row['wall_s']:.0f} s training")
@@ -151,8 +165,16 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
         rows = [r for r in rows if r["key"] not in keys] + new_rows
         write_results(results_path, rows)
 
+    def scored(job: Job) -> dict | None:   # a finished row of the same training folder, if any
+        return next((r for r in rows if r.get("run_dir") == job.folder and r.get("config_hash") == job.config_hash()
+                     and r.get("status") != "failed"), None)
+
     t0 = time.time()
     remaining = [j for j in todo if (j.key, j.config_hash()) not in done]
+    reusable = [(j, scored(j)) for j in remaining]
+    if any(r for _, r in reusable):
+        record([reused_row(j, r) for j, r in reusable if r])
+        remaining = [j for j, r in reusable if not r]
     if ray is not None:
         from benchmark.distributed import run_jobs_on_ray
 
@@ -160,7 +182,9 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     else:
         for n, job in enumerate(remaining, 1):
             log(f"bench [{n}/{len(remaining)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
-            row = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
+            earlier = scored(job)
+            row = (reused_row(job, earlier) if earlier else
+                   run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key]))
             record([row])
             log(f"bench [{n}/{len(remaining)}] {row_summary(row)}")
     log(f"bench {preset_name}: done in {time.time() - t_start:.0f} s ({dataset_s:.0f} s dataset, "

@@ -142,6 +142,10 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
     monkeypatch.setattr(runner, "run_job", lambda job, *a, **k: resumed.append(job.key) or real(job, *a, **k))
     rows = run_bench(cfg, "tiny", motion_scene.parent, out, progress=False, log=lambda s: None)
     assert not set(resumed) & set(calls)                     # finished jobs are reused, not retrained
+    by_key = {r["key"]: r for r in rows}                     # a folder two jobs share is trained and scored once
+    full, main_e4dgs = by_key[f"ablation/{motion_scene.name}/e4dgs/full/seed0"], by_key[f"main/{motion_scene.name}/e4dgs"]
+    assert full["key"] not in calls + resumed and full["scored_as"] == main_e4dgs["key"] and full["eval_s"] == 0.0
+    assert (full["psnr"], full["lpips"], full["run_dir"]) == (main_e4dgs["psnr"], main_e4dgs["lpips"], main_e4dgs["run_dir"])
     keys = {r["key"] for r in rows}
     assert {f"main/{motion_scene.name}/{c}" for c in MAIN_CELLS} <= keys
     assert f"blur/{motion_scene.name}/d3dgs_blur/mild" in keys and f"blur/{motion_scene.name}/deblur_d3dgs/mild" in keys and f"ablation/{motion_scene.name}/e4dgs/w/o AES/seed0" in keys

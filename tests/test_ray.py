@@ -84,6 +84,8 @@ def test_tiny_grid_on_ray_gives_the_serial_numbers(motion_scene, tmp_path, local
     # the ablation's full seed-0 run shares the main E-4DGS folder: trained once, by one task
     logs = sorted(p.name for p in (tmp_path / "ray" / "logs").iterdir())
     assert len(logs) == 4 and all("attempt started" in (tmp_path / "ray" / "logs" / n).read_text() for n in logs)
+    shared = [r for r in on_ray if r.get("scored_as")]          # ... and scored once: its row is copied
+    assert [(r["study"], r["variant"], r["eval_s"]) for r in shared] == [("ablation", "full", 0.0)]
     # a second run reuses every row and submits nothing
     again = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "ray", cells=GRID, progress=False, log=quiet,
                       ray=local_ray)
