@@ -118,3 +118,20 @@ def sha256_file(path: str | os.PathLike) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
+    """Every file under src at the same place under dst: a hard link, or a copy where the file system
+    refuses links (another device). An existing file at dst is replaced."""
+    import shutil
+
+    src, dst = Path(src), Path(dst)
+    for f in sorted(p for p in src.rglob("*") if p.is_file()):
+        target = dst / f.relative_to(src)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if target.exists():
+            target.unlink()
+        try:
+            os.link(f, target)
+        except OSError:
+            shutil.copy2(f, target)

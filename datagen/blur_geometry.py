@@ -113,8 +113,21 @@ class LogHistogram:
 @dataclass(frozen=True)
 class LevelChoice:
     level: str
-    target_px: float
+    target_px: float | None       # None: a level declared by its exposure
     n_frames: int
+
+
+def fixed_exposures(exposure_ms: dict[str, float], fps: float, n_timestamps: int, scene: str) -> list[LevelChoice]:
+    """Levels declared by a real-time exposure: n = round(ms * fps) rendered frames (at least 1; fps is
+    rendered frames per real second). One longer than the clip is a ConfigError naming the scene and level."""
+    out = []
+    for level in sorted(exposure_ms, key=exposure_ms.get):
+        n = max(1, int(round(exposure_ms[level] * 1e-3 * fps)))
+        if n > n_timestamps:
+            raise ConfigError(f"scene {scene}, blur level {level}: the {exposure_ms[level]:g} ms exposure spans {n} "
+                              f"rendered frames, more than the clip's {n_timestamps}")
+        out.append(LevelChoice(level, None, n))
+    return out
 
 
 def choose_exposures(medians_px: np.ndarray, target_px: dict[str, float], tolerance: float, fps: float,
@@ -174,54 +187,81 @@ def _view_paths(local, obj, mats, c2w, K, i_center, n_max, T):
     return lo, cumulative_path_px(uv)
 
 
+def choose_levels(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndarray, centers: np.ndarray,
+                  blur_cfg, fps: float, scene: str) -> list[LevelChoice]:
+    """Each pixel-declared level's exposure (the one whose median blur is closest to its target) and
+    each exposure-declared level's. fps: rendered frames per real second (render.fps * speed)."""
+    T = mats.shape[0]
+    choices = []
+    if blur_cfg.target_px:
+        n_cap = int(np.floor(blur_cfg.max_exposure_ms * 1e-3 * fps + 1e-9))
+        n_max = max(1, min(T, n_cap))
+        limit = (f"the clip's {T} rendered frames" if T <= n_cap else f"max_exposure_ms = {blur_cfg.max_exposure_ms:g}")
+        hist = LogHistogram(n_max)
+        for (k, j), (local, obj) in samples.items():
+            if not len(local):
+                continue
+            lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_max, T)
+            first, last = candidate_windows(int(centers[j]), n_max, T, offset=lo)
+            hist.add(window_path_px(cum, first, last))
+        choices = choose_exposures(hist.quantile(0.5), blur_cfg.target_px, blur_cfg.tolerance, fps, scene, limit)
+    return choices + fixed_exposures(blur_cfg.exposure_ms, fps, T, scene)
+
+
 def measure_blur(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndarray, centers: np.ndarray,
                  blur_cfg, fps: float, scene: str) -> BlurReport:
-    """Choose each level's exposure and measure what it does.
+    """Choose every level's exposure and measure what it does.
 
     samples {(camera, j): (local points [N, 3], part index [N])} from the renderer at blurred frame
-    j's centre frame centers[j]; mats [T, O, 4, 4] part matrices; poses [C, T, 4, 4] OpenCV c2w.
+    j's centre frame centers[j]; mats [T, O, 4, 4] part matrices; poses [C, T, 4, 4] OpenCV c2w;
+    fps: rendered frames per real second (render.fps times the scene's speed).
     """
+    return measure_blur_many(samples, mats, poses, K, centers, [(blur_cfg, fps)], scene)[0]
+
+
+def measure_blur_many(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndarray, centers: np.ndarray,
+                      configs: list, scene: str) -> list[BlurReport]:
+    """measure_blur for several (blur config, fps) pairs over the same frames and poses (a scene and
+    its speed variants), tracking every view once for all of them."""
+    choices = [choose_levels(samples, mats, poses, K, centers, b, fps, scene) for b, fps in configs]
+    stats = _path_statistics(samples, mats, poses, K, centers, sorted({c.n_frames for cs in choices for c in cs}))
+    return [_report(cs, stats, b, fps, centers, mats.shape[0]) for cs, (b, fps) in zip(choices, configs)]
+
+
+def _path_statistics(samples, mats, poses, K, centers, exposures: list[int]) -> dict:
+    """Per exposure n (rendered frames): every camera's blur paths and every view's median, and the
+    image motion per rendered frame. Each view's paths are computed once here rather than kept from
+    the choice's pass, which would hold every view's [2 n_max + 1, N] array (~2 GB for a quick room)."""
     T, C, J = mats.shape[0], poses.shape[0], len(centers)
-    n_cap = int(np.floor(blur_cfg.max_exposure_ms * 1e-3 * fps + 1e-9))
-    n_max = max(1, min(T, n_cap))
-    limit = (f"the clip's {T} rendered frames" if T <= n_cap else f"max_exposure_ms = {blur_cfg.max_exposure_ms:g}")
-    hist = LogHistogram(n_max)
+    n_track = max(exposures + [2])
+    per_cam = {(n, k): [] for n in exposures for k in range(C)}
+    view_median = {n: np.full((C, J), np.nan) for n in exposures}
     step = []
     for (k, j), (local, obj) in samples.items():
         if not len(local):
             continue
-        lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_max, T)
-        first, last = candidate_windows(int(centers[j]), n_max, T, offset=lo)
-        hist.add(window_path_px(cum, first, last))
+        lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_track, T)
         c = int(centers[j]) - lo
         a, b = (c, c + 1) if c + 1 < len(cum) else (c - 1, c)
         step.append(cum[b] - cum[a])
-    choices = choose_exposures(hist.quantile(0.5), blur_cfg.target_px, blur_cfg.tolerance, fps, scene, limit)
-
-    # Second pass: the exact statistics of the chosen exposures. Each view's paths are recomputed
-    # rather than kept from the first pass, which would hold every view's [2 n_max + 1, N] array
-    # (~2 GB for a quick room scene); recomputing costs the first pass's time again.
-    per_cam = {(c.level, k): [] for c in choices for k in range(C)}
-    view_median = {c.level: np.full((C, J), np.nan) for c in choices}
-    for (k, j), (local, obj) in samples.items():
-        if not len(local):
-            continue
-        lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_max, T)
-        for c in choices:
-            first, last = exposure_window(int(centers[j]), c.n_frames, T)
+        for n in exposures:
+            first, last = exposure_window(int(centers[j]), n, T)
             path = cum[last - lo] - cum[first - lo]
-            per_cam[(c.level, k)].append(path)
+            per_cam[(n, k)].append(path)
             if np.isfinite(path).any():
-                view_median[c.level][k, j] = float(np.nanmedian(path))
+                view_median[n][k, j] = float(np.nanmedian(path))
+    steps = np.concatenate(step) if step else np.zeros(0)
+    return {"per_cam": per_cam, "view_median": view_median, "steps": steps[np.isfinite(steps)], "C": C}
+
+
+def _report(choices: list[LevelChoice], stats: dict, blur_cfg, fps: float, centers: np.ndarray, T: int) -> BlurReport:
+    per_cam, C, steps = stats["per_cam"], stats["C"], stats["steps"]
     levels = {}
     for c in choices:
-        everything = np.concatenate([np.concatenate(per_cam[(c.level, k)] or [np.zeros(0)]) for k in range(C)])
+        cams = [np.concatenate(per_cam[(c.n_frames, k)] or [np.zeros(0)]) for k in range(C)]
         levels[c.level] = {"target_px": c.target_px, "n_frames": c.n_frames,
-                           "exposure_ms": round(1e3 * c.n_frames / fps, 4), **summarize(everything),
-                           "per_camera": [summarize(np.concatenate(per_cam[(c.level, k)] or [np.zeros(0)]))
-                                          for k in range(C)]}
-    steps = np.concatenate(step) if step else np.zeros(0)
-    steps = steps[np.isfinite(steps)]
+                           "exposure_ms": round(1e3 * c.n_frames / fps, 4), **summarize(np.concatenate(cams)),
+                           "per_camera": [summarize(v) for v in cams]}
     px_per_frame = ({"median": round(float(np.median(steps)), 3), "p90": round(float(np.percentile(steps, 90)), 3),
                      "p99": round(float(np.percentile(steps, 99)), 3), "max": round(float(steps.max()), 3)}
                     if len(steps) else {})
@@ -231,4 +271,5 @@ def measure_blur(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndarr
                           "projected; blur length = length of that image path; median and p90 over hits",
                 "sample_stride_px": blur_cfg.sample_stride_px, "tolerance": blur_cfg.tolerance,
                 "max_exposure_ms": blur_cfg.max_exposure_ms, "levels": levels, "px_per_frame": px_per_frame}
+    view_median = {c.level: stats["view_median"][c.n_frames] for c in choices}
     return BlurReport(choices, windows, manifest, view_median)

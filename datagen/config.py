@@ -131,6 +131,7 @@ class BlurConfig:
     sample_stride_px: the blur length is measured on every n-th pixel in x and y.
     """
     target_px: dict[str, float] = field(default_factory=dict)
+    exposure_ms: dict[str, float] = field(default_factory=dict)   # levels of a fixed exposure (real-time ms)
     tolerance: float = 0.15
     max_exposure_ms: float = 40.0
     sample_stride_px: int = 4
@@ -143,13 +144,42 @@ class BlurConfig:
         values = list(self.target_px.values())
         if len(set(values)) != len(values):
             raise ConfigError(f"target_px: two levels share a target ({self.target_px})")
+        for level, ms in self.exposure_ms.items():
+            if not ms > 0:
+                raise ConfigError(f"exposure_ms.{level}: expected a positive exposure in milliseconds, got {ms!r}")
+            if level in self.target_px:
+                raise ConfigError(f"exposure_ms.{level}: level {level!r} is also declared in target_px")
         if not self.tolerance < 1:
             raise ConfigError(f"tolerance: expected a relative tolerance below 1, got {self.tolerance!r}")
 
     @property
     def levels(self) -> list[str]:
-        """Level names from the weakest to the strongest blur."""
-        return sorted(self.target_px, key=self.target_px.get)
+        """Level names: those declared in pixels from the weakest to the strongest blur, then those
+        declared by a fixed exposure from the shortest to the longest."""
+        return sorted(self.target_px, key=self.target_px.get) + sorted(self.exposure_ms, key=self.exposure_ms.get)
+
+
+@dataclass(frozen=True)
+class SpeedConfig:
+    """Speed variants: the same render traversed `factors` times faster (datagen.speed).
+
+    Variant s of scene NAME is the folder NAME_x<s>: the clip's timestamps divided by s, the events
+    re-simulated from the same rendered frames at those timestamps with the scene's sensor, and
+    blurred frames (level `shutter`) of a fixed real-time exposure `exposure_ms`, which integrate
+    exposure_ms * fps * s rendered frames. A speed whose exposure exceeds the clip, or a render whose
+    image moves more than `max_px_per_frame` (p90) between rendered frames, is refused.
+    """
+    factors: tuple[float, ...] = ()
+    exposure_ms: float = 2.0
+    max_px_per_frame: float = 2.0
+
+    def __post_init__(self):
+        check_positive(self, "exposure_ms", "max_px_per_frame")
+        for s in self.factors:
+            if not (isinstance(s, (int, float)) and s >= 1):
+                raise ConfigError(f"factors: expected speed factors >= 1, got {s!r}")
+        if len(set(self.factors)) != len(self.factors):
+            raise ConfigError(f"factors: a speed appears twice ({list(self.factors)})")
 
 
 @dataclass(frozen=True)
@@ -166,9 +196,13 @@ class SceneConfig:
     frames: FramesConfig = field(default_factory=FramesConfig)
     blur: BlurConfig = field(default_factory=BlurConfig)  # no target_px: no blurred frames
     sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
+    speed: float = 1.0     # this folder's time compression: the clip lasts duration_s / speed real seconds
+    speeds: SpeedConfig = field(default_factory=SpeedConfig)   # speed variants written beside the scene
 
     def __post_init__(self):
         check_positive(self, "duration_s")
+        if not self.speed >= 1:
+            raise ConfigError(f"speed: expected a time compression factor >= 1, got {self.speed!r}")
         if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
             raise ConfigError(f"motion_strength: expected a value >= 0, got {self.motion_strength!r}")
 
@@ -177,11 +211,31 @@ class SceneConfig:
         """Rendered timestamps: the clip [0, duration] sampled at fps, both ends included."""
         return int(round(self.duration_s * self.render.fps)) + 1
 
+    @property
+    def real_duration_s(self) -> float:
+        """How long the clip lasts for the sensor and the shutter: duration_s / speed."""
+        return self.duration_s / self.speed
+
+    @property
+    def real_fps(self) -> float:
+        """Rendered frames per real second: render.fps * speed."""
+        return self.render.fps * self.speed
+
 
 @dataclass(frozen=True)
 class PresetConfig:
     scenes: tuple[str, ...] = SCENE_NAMES
     overrides: dict[str, Any] = field(default_factory=dict)  # merged into every scene's YAML
+    scene_overrides: dict[str, dict[str, Any]] = field(default_factory=dict)  # then into one scene's
+
+    def __post_init__(self):
+        for name in self.scene_overrides:
+            if name not in self.scenes:
+                raise ConfigError(f"scene_overrides.{name}: not one of the preset's scenes ({', '.join(self.scenes)})")
+
+    def scene(self, name: str) -> dict[str, Any]:
+        """The overrides of one scene: the preset's, then the scene's own."""
+        return deep_merge(self.overrides, self.scene_overrides.get(name, {}))
 
 
 def deep_merge(base: Mapping, override: Mapping) -> dict:
@@ -211,7 +265,7 @@ def load_preset(preset: str | Path) -> PresetConfig:
         raise ConfigError(f"{path}: {exc}") from None
     for name in preset_cfg.scenes:   # every scene must build with the preset's overrides: blame the right file
         try:
-            resolve_scene(name, preset_cfg.overrides)
+            resolve_scene(name, preset_cfg.scene(name))
         except ConfigError as exc:
             resolve_scene(name)           # the scene's own YAML is wrong: that error, naming it
             detail = str(exc).split(": ", 1)[1] if ": " in str(exc) else str(exc)

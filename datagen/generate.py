@@ -4,10 +4,13 @@
 
 Per rendered timestamp the scene is evaluated once and every camera rendered; each linear frame goes
 straight into that camera's simulator and its events are appended to the camera's spool. Frames are
-written only at kept timestamps; blurred frames are running means over their exposure windows. A
-checkpoint (simulator states, spool counts, open blur sums, timings) is saved every
-`checkpoint_every` timestamps; a killed run restarted with the same config continues from it and
-ends with the same files. `manifest.json` is written last: a scene folder without it is incomplete.
+written only at kept timestamps; blurred frames are running means over their exposure windows. The
+scene's speed variants (`speeds.factors`, datagen.speed) take the same frames in the same pass, each
+with its own simulators (at its compressed timestamps) and blur sums, and become the folders
+`<scene>_x<s>`. A checkpoint (simulator states, spool counts, open blur sums, timings, of the scene
+and of every variant) is saved every `checkpoint_every` timestamps; a killed run restarted with the
+same config continues from it and ends with the same files. `manifest.json` is written last (the
+variants' before the scene's): a scene folder without it is incomplete.
 """
 from __future__ import annotations
 
@@ -26,14 +29,15 @@ from common import provenance
 from common.provenance import git_commit as _git_commit
 from datagen import render as R
 from datagen.blur import BlurStack
-from datagen.blur_geometry import BlurReport, measure_blur
+from datagen.blur_geometry import BlurReport, measure_blur_many
 from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, scene_poses
 from datagen.config import SceneConfig, load_preset, resolve_scene
-from datagen.preview import blur_psnr, contact_sheet
+from datagen.preview import blur_psnr, contact_sheet, speed_sheet
+from datagen.speed import SHUTTER_LEVEL, check_interpolation, check_speeds, variant_config, variant_name
 from common.checkpoint import JobCheckpoint
 from common.config import ConfigError, dump_config
 from common.argtypes import positive_int
-from common.fileio import output_lock, sha256_file, write_text_atomic
+from common.fileio import link_tree, output_lock, sha256_file, write_text_atomic
 from common.imageio import write_exr, write_png_srgb
 from simulator.h5io import read_info, simulator_attrs
 from simulator.pixel import rec709_luma
@@ -48,7 +52,8 @@ def config_fingerprint(cfg: SceneConfig) -> str:
 
 
 def timestamps_us(cfg: SceneConfig) -> np.ndarray:
-    return np.round(np.arange(cfg.n_timestamps) * 1e6 / cfg.render.fps).astype(np.int64)
+    """Real time (us) of every rendered frame: i / (fps * speed)."""
+    return np.round(np.arange(cfg.n_timestamps) * 1e6 / cfg.real_fps).astype(np.int64)
 
 
 def _versions() -> dict:
@@ -59,14 +64,19 @@ class SceneJob:
     """State of one scene's generation; `run()` does the work (resuming if a checkpoint matches)."""
 
     def __init__(self, cfg: SceneConfig, out_root: Path, preset: str = "custom", checkpoint_every: int = 100,
-                 progress: bool = True, position: int = 0):
+                 progress: bool = True, position: int = 0, folder: str | None = None, tau: np.ndarray | None = None):
         self.cfg, self.preset, self.progress, self.position = cfg, preset, progress, position
-        self.dir = Path(out_root) / cfg.name
+        self.dir = Path(out_root) / (folder or cfg.name)
         if int(checkpoint_every) < 1:
             raise ValueError(f"checkpoint_every: expected an integer >= 1, got {checkpoint_every!r}")
         self.checkpoint_every = int(checkpoint_every)
         self.t_us = timestamps_us(cfg)
-        self.tau = self.t_us / self.t_us[-1] if self.t_us[-1] > 0 else np.zeros(len(self.t_us))
+        if tau is None:        # a speed variant shows its scene's frames: it takes the scene's tau
+            tau = self.t_us / self.t_us[-1] if self.t_us[-1] > 0 else np.zeros(len(self.t_us))
+        self.tau = tau
+        check_speeds(cfg.name, cfg.speeds.factors, cfg.speeds.exposure_ms, cfg.render.fps, cfg.n_timestamps)
+        self.variants = [SceneJob(variant_config(cfg, s), out_root, preset, checkpoint_every, False, position,
+                                  variant_name(cfg.name, s), tau) for s in cfg.speeds.factors]
         self.intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
         self.poses = scene_poses(cfg, self.tau)  # [C, T, 4, 4] OpenCV c2w
         self.kept = np.arange(0, cfg.n_timestamps, cfg.frames.keep_every)
@@ -77,6 +87,7 @@ class SceneJob:
 
     # -- files -------------------------------------------------------------------------------
     def is_complete(self) -> bool:
+        """Whether the scene (and so its variants, written before it) is complete with this config."""
         manifest = self.dir / "manifest.json"
         if not manifest.exists():
             return False
@@ -108,36 +119,56 @@ class SceneJob:
         renderer = R.ViewRenderer()
         ckpt = JobCheckpoint(self.dir / ".generate.ckpt.npz", self.fingerprint)
         state = self._resumable_state(ckpt)
-        sims, spools, stacks = self._open_streams(state)
+        streams = [job._open_streams(state, job._prefix()) for job in self.jobs]
+        sims, spools, stacks = streams[0]
         start = int(state.get("next_index", 0))
         if start:
             print(f"{cfg.name}: resuming at timestamp {start} of {cfg.n_timestamps}", flush=True)
-        seconds = {name: float(state.get(f"seconds_{name}", 0.0)) for name in ("blur_geometry", "render", "simulate", "write", "total")}
-        seconds["blur_geometry"] += t_blur
+        seconds = [{name: float(state.get(f"{job._prefix()}seconds_{name}", 0.0))
+                    for name in ("blur_geometry", "render", "simulate", "write", "total")} for job in self.jobs]
+        seconds[0]["blur_geometry"] += t_blur
         bar = tqdm(range(start, cfg.n_timestamps), desc=cfg.name, unit="ts", initial=start, total=cfg.n_timestamps,
                    disable=not self.progress, dynamic_ncols=True, position=self.position)
         try:
             for i in bar:
-                self._timestamp(i, cams, renderer, sims, spools, stacks, seconds)
+                frames = self._render(i, cams, renderer, seconds[0])
+                for job, stream, secs in zip(self.jobs, streams, seconds):
+                    job._consume(i, frames, *stream, secs)
                 if self.progress and i % 10 == 0:
                     bar.set_postfix_str(" ".join(f"c{k}:{s.n_events / 1e3:.0f}k" for k, s in enumerate(spools)))
                 if (i + 1) % self.checkpoint_every == 0 and i + 1 < cfg.n_timestamps:
-                    self._checkpoint(ckpt, i + 1, sims, spools, stacks, seconds, t_start)
+                    self._checkpoint(ckpt, i + 1, streams, seconds, t_start)
         finally:
             bar.close()
             renderer.close()
-        for k, spool in enumerate(spools):
-            spool.finish(t_end_us=int(self.t_us[-1]))
-        seconds["total"] += time.perf_counter() - t_start
-        self._write_metadata(seconds)
+        for job, (_, job_spools, _), secs in zip(self.jobs, streams, seconds):
+            for spool in job_spools:
+                spool.finish(t_end_us=int(job.t_us[-1]))
+        seconds[0]["total"] += time.perf_counter() - t_start
+        for variant, secs in zip(self.variants, seconds[1:]):   # before the scene's manifest, which marks completion
+            t0 = time.perf_counter()
+            for part in ("frames", "rgb", "gray"):        # the same sharp frames: hard links where possible
+                link_tree(self.dir / part, variant.dir / part)
+            secs["write"] += time.perf_counter() - t0
+            variant._write_metadata(secs)
+        self._write_metadata(seconds[0])
         ckpt.remove()
         return self.dir
+
+    @property
+    def jobs(self) -> list["SceneJob"]:
+        """This scene and its speed variants, which share its render loop."""
+        return [self] + self.variants
+
+    def _prefix(self) -> str:
+        """Checkpoint key prefix of this job's state: '' for the scene, '<folder>__' for a variant."""
+        return f"{self.dir.name}__" if self._is_variant else ""
 
     def _resumable_state(self, ckpt: JobCheckpoint) -> dict:
         """The checkpoint's state if its event spools hold what it records, else {} (start over, saying why)."""
         state = ckpt.load() or {}
-        if state and not all(can_resume(self._event_path(k), int(state[f"n_events_{k}"]))
-                             for k in range(self.cfg.camera.n_cameras)):
+        if state and not all(can_resume(job._event_path(k), int(state[f"{job._prefix()}n_events_{k}"]))
+                             for job in self.jobs for k in range(self.cfg.camera.n_cameras)):
             print(f"warning: {ckpt.path}: its event spools are missing or shorter than it records; starting "
                   f"{self.cfg.name} over from the first timestamp", flush=True)
             ckpt.remove()
@@ -147,25 +178,29 @@ class SceneJob:
     def _event_path(self, camera: int) -> Path:
         return self.dir / "events" / f"cam{camera}.h5"
 
-    def _open_streams(self, state: dict):
-        """Per camera: the simulator, the event spool and the blur accumulators, restored from `state`."""
+    def _open_streams(self, state: dict, prefix: str = ""):
+        """Per camera: the simulator, the event spool and the blur accumulators, restored from `state`
+        (this job's keys carry `prefix`)."""
         cfg = self.cfg
         C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
         sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.seed * 1000 + k) for k in range(C)]
         attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
+        if cfg.speed != 1:
+            attrs["speed"] = cfg.speed
         spools = []
         for k in range(C):
             spools.append(EventSpool(self._event_path(k), W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
-                                     resume_count=int(state[f"n_events_{k}"]) if state else None))
+                                     resume_count=int(state[f"{prefix}n_events_{k}"]) if state else None))
             if state:
-                sims[k].load_state_dict({key[len(f"sim{k}__"):]: v for key, v in state.items() if key.startswith(f"sim{k}__")})
+                key0 = f"{prefix}sim{k}__"
+                sims[k].load_state_dict({key[len(key0):]: v for key, v in state.items() if key.startswith(key0)})
         stacks = {(level, k): BlurStack(self.windows[level]) for level in self.windows for k in range(C)}
         for (level, k), stack in stacks.items():
-            stack.load_state(state, f"blur__{level}__{k}__")
+            stack.load_state(state, f"{prefix}blur__{level}__{k}__")
         return sims, spools, stacks
 
-    def _timestamp(self, i: int, cams, renderer, sims, spools, stacks, seconds: dict) -> None:
-        """Render every camera at timestamp i, feed the simulators, write kept and blurred frames."""
+    def _render(self, i: int, cams, renderer, seconds: dict) -> list[np.ndarray]:
+        """Every camera's linear frame [H, W, 3] at rendered timestamp i."""
         cfg = self.cfg
         t0 = time.perf_counter()
         R.set_time(float(self.tau[i]))
@@ -174,26 +209,35 @@ class SceneJob:
         for k, cam in enumerate(cams):
             R.set_pose(cam, self.poses[k, i])
             frames.append(renderer.render(cam) * np.float32(cfg.lighting.exposure))
+        seconds["render"] += time.perf_counter() - t0
+        return frames
+
+    def _consume(self, i: int, frames: list[np.ndarray], sims, spools, stacks, seconds: dict) -> None:
+        """Feed frame i of every camera to its simulator (at this job's timestamp of i), write it if kept
+        (the scene only: variants link the scene's), and add it to the blur sums."""
         t1 = time.perf_counter()
-        for k in range(len(cams)):
-            spools[k].append(sims[k].push(rec709_luma(frames[k]), int(self.t_us[i])))
+        for k, frame in enumerate(frames):
+            spools[k].append(sims[k].push(rec709_luma(frame), int(self.t_us[i])))
         t2 = time.perf_counter()
-        kept_index = self._kept_index.get(i)
-        for k in range(len(cams)):
+        kept_index = self._kept_index.get(i) if not self._is_variant else None
+        for k, frame in enumerate(frames):
             if kept_index is not None:
-                self._write_kept(k, kept_index, frames[k])
+                self._write_kept(k, kept_index, frame)
             for level in self.windows:
-                for j, mean in stacks[(level, k)].add(i, frames[k]):
+                for j, mean in stacks[(level, k)].add(i, frame):
                     write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
-        t3 = time.perf_counter()
-        seconds["render"] += t1 - t0
         seconds["simulate"] += t2 - t1
-        seconds["write"] += t3 - t2
+        seconds["write"] += time.perf_counter() - t2
+
+    @property
+    def _is_variant(self) -> bool:
+        return self.dir.name != self.cfg.name
 
     def _measure_blur(self) -> None:
-        """Pick every blur level's exposure from the scene geometry (datagen.blur_geometry)."""
+        """Pick every blur level's exposure from the scene geometry (datagen.blur_geometry), the
+        scene's and its speed variants'; refuse variants the render moves too fast for."""
         cfg = self.cfg
-        if not cfg.blur.target_px:
+        if not any(job.cfg.blur.target_px or job.cfg.blur.exposure_ms for job in self.jobs):
             return
         from datagen.render_geometry import RigidMotionError, sample_scene_motion
 
@@ -202,23 +246,33 @@ class SceneJob:
                                                 cfg.render.height, cfg.blur.sample_stride_px)
         except RigidMotionError as exc:
             raise RigidMotionError(f"scene {cfg.name}: {exc}") from None
-        self.blur = measure_blur(samples, mats, self.poses, self.intr.K, self.kept, cfg.blur, cfg.render.fps, cfg.name)
-        self.windows = self.blur.windows
+        jobs = [job for job in self.jobs if job.cfg.blur.target_px or job.cfg.blur.exposure_ms]
+        reports = measure_blur_many(samples, mats, self.poses, self.intr.K, self.kept,
+                                    [(job.cfg.blur, job.cfg.real_fps) for job in jobs], cfg.name)
+        for job, report in zip(jobs, reports):      # variants show the scene's frames: same poses and kept frames
+            job.blur, job.windows = report, report.windows
+        if self.variants:
+            check_interpolation(cfg.name, cfg.speeds.factors, self.variants[0].blur.manifest["px_per_frame"].get("p90", 0.0),
+                                cfg.speeds.max_px_per_frame)
         if self.progress:
-            levels = self.blur.manifest["levels"]
-            print(f"{cfg.name}: blur exposures " + ", ".join(
-                f"{name} {lv['n_frames']} frames ({lv['exposure_ms']:.2f} ms): {lv['median_px']:.1f} px"
-                for name, lv in levels.items()), flush=True)
+            for job in self.jobs:
+                levels = job.blur.manifest["levels"] if job.blur else {}
+                print(f"{job.dir.name}: blur exposures " + ", ".join(
+                    f"{name} {lv['n_frames']} frames ({lv['exposure_ms']:.2f} ms): {lv['median_px']:.1f} px"
+                    for name, lv in levels.items()), flush=True)
 
-    def _checkpoint(self, ckpt, next_index, sims, spools, stacks, seconds, t_start) -> None:
+    def _checkpoint(self, ckpt, next_index, streams, seconds, t_start) -> None:
         state = {"next_index": next_index}
-        for k, (sim, spool) in enumerate(zip(sims, spools)):
-            state[f"n_events_{k}"] = spool.sync()
-            state.update({f"sim{k}__{key}": v for key, v in sim.state_dict().items()})
-        for (level, k), stack in stacks.items():
-            state.update(stack.state(f"blur__{level}__{k}__"))
         elapsed = time.perf_counter() - t_start
-        state.update({f"seconds_{name}": v + (elapsed if name == "total" else 0.0) for name, v in seconds.items()})
+        for job, (sims, spools, stacks), secs in zip(self.jobs, streams, seconds):
+            p = job._prefix()
+            for k, (sim, spool) in enumerate(zip(sims, spools)):
+                state[f"{p}n_events_{k}"] = spool.sync()
+                state.update({f"{p}sim{k}__{key}": v for key, v in sim.state_dict().items()})
+            for (level, k), stack in stacks.items():
+                state.update(stack.state(f"{p}blur__{level}__{k}__"))
+            state.update({f"{p}seconds_{name}": v + (elapsed if name == "total" and job is self else 0.0)
+                          for name, v in secs.items()})
         ckpt.save(state)
 
     # -- metadata ------------------------------------------------------------------------------
@@ -237,13 +291,18 @@ class SceneJob:
         self._write_transforms()
         write_text_atomic(d / "scene.yaml", f"# resolved scene config (preset: {self.preset})\n" + dump_config(cfg))
         mid = len(self.kept) // 2
-        window = max(int(round(cfg.frames.keep_every * 1e6 / cfg.render.fps)), 1000)
+        window = max(int(round(cfg.frames.keep_every * 1e6 / cfg.real_fps)), int(round(1000 / cfg.speed)))
         blur = self.blur.manifest if self.blur else None
         if blur:
             for level in self.windows:
                 blur["levels"][level]["psnr_vs_sharp_db"] = blur_psnr(d, level, C, len(self.kept))
         labels = {level: [f"{m:.1f} px" for m in self.blur.view_median_px[level][:, mid]] for level in self.windows}
-        contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png")
+        if self._is_variant:
+            labels = {f"x{cfg.speed:g} {lv} {cfg.blur.exposure_ms[lv]:g} ms": v for lv, v in labels.items()}
+        contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png",
+                      folders=list(self.windows))
+        if self.variants:
+            speed_sheet(d, [v.dir for v in self.variants], mid, d / "preview" / "speeds.png")
         seconds["write"] += time.perf_counter() - t_write
         n_events = [read_info(d / "events" / f"cam{k}.h5")["n_events"] for k in range(C)]
         files = sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith(".") and p.name != "manifest.json")
@@ -254,12 +313,29 @@ class SceneJob:
             "counts": {"cameras": C, "timestamps": cfg.n_timestamps, "kept_frames_per_camera": len(self.kept),
                        "test_frames_per_camera": int(np.sum(np.arange(len(self.kept)) % cfg.frames.test_every == 0)),
                        "events_per_camera": n_events},
-            "events_per_second_per_camera": [round(n / cfg.duration_s) for n in n_events],
+            "events_per_second_per_camera": [round(n / cfg.real_duration_s) for n in n_events],
             "blur": blur,
+            **self._speed_manifest(),
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
             "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": sha256_file(p)} for p in files},
         }
         write_text_atomic(d / "manifest.json", json.dumps(manifest, indent=1))
+
+    def _speed_manifest(self) -> dict:
+        """A variant's speed (factor, exposure, frames it integrates, real clip length); a scene's variants."""
+        cfg = self.cfg
+        out = {}
+        if self._is_variant:
+            out["speed"] = {"factor": cfg.speed, "exposure_ms": cfg.speeds.exposure_ms,
+                            "n_frames": self.blur.manifest["levels"][SHUTTER_LEVEL]["n_frames"],
+                            "render_fps": cfg.render.fps, "real_fps": cfg.real_fps,
+                            "real_duration_s": cfg.real_duration_s, "scene": cfg.name,
+                            "construction": "time compression: the scene's rendered frames at timestamps divided by "
+                                            "the factor; events simulated again at those timestamps; blurred frames of "
+                                            "a fixed real-time exposure"}
+        if self.variants:
+            out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in self.variants}
+        return out
 
     def _frame_entry(self, k: int, j: int, path: str, t_us: int) -> dict:
         c2w = interpolate_pose(self.t_us, self.poses[k], t_us)
@@ -307,7 +383,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     try:
         preset = load_preset(args.preset)
-        cfg = resolve_scene(args.scene, preset.overrides, args.scene_config)
+        cfg = resolve_scene(args.scene, preset.scene(args.scene), args.scene_config)
         job = SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position)
         with output_lock(job.dir):       # two generators of one scene folder would corrupt each other
             job.run()

@@ -30,18 +30,43 @@ def _rgb8(path: Path) -> np.ndarray:
 
 
 def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, window_us: int,
-                  blur_labels: dict[str, list[str]], out: Path) -> Path:
-    """Per camera a row: sharp | each blur level in blur_labels' order (labelled "<level> <label[k]>") |
-    events in [t - w/2, t + w/2)."""
+                  blur_labels: dict[str, list[str]], out: Path, folders: list[str] | None = None) -> Path:
+    """Per camera a row: sharp | each blur level in blur_labels' order (labelled "<level> <label[k]>";
+    read from blur/<folders[i]>, default the level names) | events in [t - w/2, t + w/2)."""
     rows = []
     name = f"{frame_index:05d}.png"
+    folders = folders or list(blur_labels)
     for k in range(n_cameras):
         row = [_label(_rgb8(scene_dir / "rgb" / f"cam{k}" / name), f"cam{k} sharp")]
-        for level, labels in blur_labels.items():
-            row.append(_label(_rgb8(scene_dir / "blur" / level / f"cam{k}" / name), f"{level} {labels[k]}"))
+        for folder, (level, labels) in zip(folders, blur_labels.items()):
+            row.append(_label(_rgb8(scene_dir / "blur" / folder / f"cam{k}" / name), f"{level} {labels[k]}"))
         ev = read_window(scene_dir / "events" / f"cam{k}.h5", t_us - window_us // 2, t_us + window_us // 2)
-        row.append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:g} ms"))
+        row.append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:.3g} ms"))
         rows.append(np.concatenate(row, axis=1))
+    return write_png(out, np.concatenate(rows, axis=0))
+
+
+def speed_sheet(scene_dir: Path, variant_dirs: list[Path], frame_index: int, out: Path, camera: int = 0) -> Path:
+    """One camera at every speed: a row per variant (from the manifests written before): its blurred
+    frame (labelled with speed, exposure, median blur px and PSNR against sharp) and the events of
+    its exposure window; the sharp frame heads the first column."""
+    import json
+
+    name = f"{frame_index:05d}.png"
+    sharp = _label(_rgb8(scene_dir / "rgb" / f"cam{camera}" / name), f"cam{camera} sharp (every speed)")
+    rows = []
+    for d in variant_dirs:
+        m = json.loads((d / "manifest.json").read_text())
+        lv = m["blur"]["levels"]["shutter"]
+        exposure = next(e for e in json.loads((d / "blur" / "shutter" / "exposures.json").read_text())
+                        if e["camera"] == camera and e["index"] == frame_index)
+        blurred = _label(_rgb8(d / "blur" / "shutter" / f"cam{camera}" / name),
+                         f"x{m['speed']['factor']:g} {m['speed']['exposure_ms']:g} ms: {lv['median_px']:.0f} px, "
+                         f"{lv['psnr_vs_sharp_db']['median_db']:.1f} dB")
+        ev = read_window(d / "events" / f"cam{camera}.h5", exposure["first_frame_us"], exposure["last_frame_us"] + 1)
+        rate = m["events_per_second_per_camera"][camera] / 1e6
+        rows.append(np.concatenate([sharp if not rows else np.full_like(sharp, 255), blurred,
+                                    _label(event_frame(ev), f"{len(ev)} ev in exposure, {rate:.0f} Mev/s")], axis=1))
     return write_png(out, np.concatenate(rows, axis=0))
 
 

@@ -176,7 +176,8 @@ def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
 RESUME_PRESET = ("scenes: [cubes]\noverrides:\n  duration_s: 0.03\n  render: {width: 64, height: 48, samples: 1}\n"
                  "  camera: {n_cameras: 2}\n  frames: {keep_every: 10, test_every: 2}\n"
                  "  blur: {target_px: {mild: 1.0, medium: 2.5, strong: 5.0}, max_exposure_ms: 10.0}\n"
-                 "  sensor: {shot_noise_rate_hz: 50.0, refractory_us: 40}\n")
+                 "  sensor: {shot_noise_rate_hz: 50.0, refractory_us: 40}\n"
+                 "  speeds: {factors: [1, 3], exposure_ms: 1.0, max_px_per_frame: 10.0}\n")
 
 
 def _killed_after_first_checkpoint(preset: Path, out: Path) -> Path:
@@ -194,10 +195,16 @@ def _killed_after_first_checkpoint(preset: Path, out: Path) -> Path:
 
 
 def _same_files(a: Path, b: Path) -> list[str]:
-    ma = json.loads((a / "cubes" / "manifest.json").read_text())["files"]
-    mb = json.loads((b / "cubes" / "manifest.json").read_text())["files"]
-    assert ma.keys() == mb.keys()
-    return [k for k in ma if ma[k]["sha256"] != mb[k]["sha256"]]
+    """Files whose SHA-256 differs between two generated roots (the scene and its speed variants)."""
+    folders = sorted(p.parent.name for p in a.glob("*/manifest.json"))
+    assert folders == sorted(p.parent.name for p in b.glob("*/manifest.json")) and len(folders) == 3
+    differ = []
+    for folder in folders:
+        ma = json.loads((a / folder / "manifest.json").read_text())["files"]
+        mb = json.loads((b / folder / "manifest.json").read_text())["files"]
+        assert ma.keys() == mb.keys()
+        differ += [f"{folder}/{k}" for k in ma if ma[k]["sha256"] != mb[k]["sha256"]]
+    return differ
 
 
 def test_killed_run_resumes_to_identical_files(tmp_path):
