@@ -8,7 +8,7 @@ PRESET ?= quick
 SCENES ?=
 JOBS   ?= 1
 
-.PHONY: test install dataset benchmark ablation clean-venv
+.PHONY: test install dataset benchmark ablation speed-study clean-venv
 
 install: $(STAMP)
 
@@ -40,6 +40,12 @@ benchmark: $(STAMP)
 
 ablation: $(STAMP)
 	$(BENCH) --studies ablation
+
+# The speed study: every method at every speed of the preset's sweep (quick: garage and hinge), PSNR
+# against motion speed and where events overtake blurred RGB (runs/<preset>/speed.md, speed.png).
+# Reuses `make benchmark`'s dataset and the runs that coincide with it.
+speed-study: $(STAMP)
+	$(BENCH) --studies speed
 
 clean-venv:
 	rm -rf $(VENV)

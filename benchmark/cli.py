@@ -16,7 +16,9 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--scenes", default=None, help="comma-separated subset of the preset's scenes")
     p.add_argument("--methods", default=None, help="comma-separated subset of cells (d3dgs_sharp, d3dgs_blur, "
                                                    "deblur_d3dgs, e2vid_d3dgs, e4dgs, e4dgs_rgb)")
-    p.add_argument("--studies", default="main,blur,ablation", help="which studies to run (default all)")
+    p.add_argument("--studies", default="main,blur,ablation",
+                   help="which studies to run: main, blur, ablation, speed (default main,blur,ablation; the speed "
+                        "study runs only when named, as `make speed-study`)")
     p.add_argument("--ablation-seeds", default=None,
                    help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")
     p.add_argument("--data", type=Path, default=None, help="dataset root (default data/<dataset>)")
@@ -59,6 +61,9 @@ def run_bench_cli(args: argparse.Namespace) -> int:
               f"(no GPU) unless the rows' versions say otherwise.")
     if not args.report:
         studies = tuple(split(args.studies) or ())
+        unknown = [st for st in studies if st not in ("main", "blur", "ablation", "speed")]
+        if unknown:
+            raise SystemExit(f"error: --studies: {', '.join(map(repr, unknown))} is not a study (main, blur, ablation, speed)")
         try:
             run_bench(cfg, name, args.data or Path("data") / cfg.dataset, out, scenes, cells, studies,
                       progress=not args.no_progress, ray=ray_options(args))

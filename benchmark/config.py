@@ -29,14 +29,37 @@ class CellSpec:
     method: str
     config: str = ""                                   # recon config YAML, relative to the repository root
     overrides: dict[str, Any] = field(default_factory=dict)   # dotted keys, as `--set`
+    speed: str = ""     # a speed level of the preset (speed_levels): train on that speed variant; "": the scene
 
 
 @dataclass(frozen=True)
 class BlurStudy:
+    """The cells at every blur level on one scene. With the preset's speed_levels a level is a speed
+    (every cell, events-only ones included, trains on that speed variant); without them a level is
+    one of the scene's exposure levels, set through the config field its method names
+    (Method.blur_level_field), and events-only methods are not re-run."""
     scene: str = ""                       # "" : no blur study
     levels: tuple[str, ...] = ("mild", "medium", "strong")
     cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
-    # each level is set through the config field its method names (Method.blur_level_field)
+
+
+@dataclass(frozen=True)
+class SpeedStudy:
+    """Every cell at every speed factor on each scene (`e4dgs bench --studies speed`): the speed
+    variants <scene>_x<s> of the dataset. d3dgs_sharp (the main cell: the sharp frames are the same at
+    every speed) is the reference line. `sensor_scene` is also run with the speed variants of a
+    realistic sensor (`sensor_dataset`, a dataset preset whose scenes declare one)."""
+    scenes: tuple[str, ...] = ()          # () : no speed study
+    speeds: tuple[float, ...] = ()
+    cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+    sensor_dataset: str = ""              # "" : no realistic-sensor run
+    sensor_cells: tuple[str, ...] = ("e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+
+    def __post_init__(self):
+        if self.scenes and not self.speeds:
+            raise ConfigError("speed.speeds: expected the speed factors of the study")
+        if any(not s >= 1 for s in self.speeds) or len(set(self.speeds)) != len(self.speeds):
+            raise ConfigError(f"speed.speeds: expected distinct speed factors >= 1, got {list(self.speeds)!r}")
 
 
 @dataclass(frozen=True)
@@ -62,6 +85,9 @@ class BenchConfig:
     cells: dict[str, CellSpec] = field(default_factory=dict)
     blur: BlurStudy = field(default_factory=BlurStudy)
     ablation: AblationStudy = field(default_factory=AblationStudy)
+    speed: SpeedStudy = field(default_factory=SpeedStudy)
+    # blur levels as motion speeds (factors of the dataset's speed variants): {mild: s1, medium: s2, ...}
+    speed_levels: dict[str, float] = field(default_factory=dict)
     # per-scene changes to a cell, on top of its overrides and under a study's own, e.g. the budget that
     # gives every cell the same training seconds on a slower scene: {scene: {cell: {dotted key: value}}}
     scene_overrides: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
@@ -76,6 +102,20 @@ class BenchConfig:
         for c in self.blur.cells:
             if c not in self.cells:
                 raise ConfigError(f"blur.cells: {c!r} is not a cell")
+        for c in self.speed.cells + self.speed.sensor_cells:
+            if c not in self.cells:
+                raise ConfigError(f"speed.cells: {c!r} is not a cell")
+        for level, factor in self.speed_levels.items():
+            if not factor >= 1:
+                raise ConfigError(f"speed_levels.{level}: expected a speed factor >= 1, got {factor!r}")
+        for name, c in self.cells.items():
+            if c.speed and c.speed not in self.speed_levels:
+                raise ConfigError(f"cells.{name}.speed: {c.speed!r} is not one of speed_levels "
+                                  f"({', '.join(self.speed_levels) or 'none declared'})")
+        if self.speed_levels:
+            for level in self.blur.levels:
+                if level not in self.speed_levels:
+                    raise ConfigError(f"blur.levels: {level!r} is not one of speed_levels ({', '.join(self.speed_levels)})")
         if self.ablation.scene and self.ablation.base not in self.cells:
             raise ConfigError(f"ablation.base: {self.ablation.base!r} is not a cell")
         for scene, per_cell in self.scene_overrides.items():
@@ -88,6 +128,11 @@ class BenchConfig:
     def overrides(self, scene: str, cell: str) -> dict[str, Any]:
         """A cell's overrides on one scene: the cell's own, then the scene's changes to it."""
         return {**self.cells[cell].overrides, **self.scene_overrides.get(scene, {}).get(cell, {})}
+
+    def cell_speed(self, cell: str) -> float | None:
+        """The speed factor a cell trains at (None: the scene itself)."""
+        level = self.cells[cell].speed
+        return float(self.speed_levels[level]) if level else None
 
 
 def load_bench(preset: str | Path) -> BenchConfig:
@@ -111,32 +156,58 @@ class Job:
     config: str
     overrides: dict[str, Any]
     seed: int | None = None   # ablation runs: the training seed (part of the key)
+    speed: float | None = None    # train on the scene's speed variant <scene>_x<speed> (None: the scene)
+    dataset: str = ""             # another dataset preset's folder (the realistic-sensor variants); "": the preset's
+
+    @property
+    def data_scene(self) -> str:
+        """The scene folder it trains on: the scene, or its speed variant."""
+        from datagen.speed import variant_name
+
+        return variant_name(self.scene, self.speed) if self.speed is not None else self.scene
 
     @property
     def key(self) -> str:
         seed = f"seed{self.seed}" if self.seed is not None else ""
-        return "/".join(p for p in (self.study, self.scene, self.cell, self.variant, seed) if p)
+        return "/".join(p for p in (self.study, self.dataset, self.scene, self.cell, self.variant, seed) if p)
 
     @property
     def folder(self) -> str:
         """Its training folder under the results root, '<scene>/<method>-<config hash>' (shared by jobs
         that train the same thing)."""
-        return f"{self.scene}/{self.method}-{self.config_hash()}"
+        prefix = f"{self.dataset}/" if self.dataset else ""
+        return f"{prefix}{self.data_scene}/{self.method}-{self.config_hash()}"
 
     def identity(self) -> dict[str, Any]:
         """The fields of its results row that say which job it is."""
         return {"key": self.key, "study": self.study, "scene": self.scene, "cell": self.cell, "variant": self.variant,
                 "seed": self.seed, "method": self.method, "config": self.config, "overrides": self.overrides,
+                "speed": self.speed, "data_scene": self.data_scene, "dataset": self.dataset,
                 "config_hash": self.config_hash(), "run_dir": self.folder}
 
     def config_hash(self) -> str:
         payload = {"method": self.method, "overrides": self.overrides,
                    "config": (REPO / self.config).read_text() if self.config else ""}
+        if self.speed is not None:      # another scene folder: another model
+            payload["speed"] = self.speed
+        if self.dataset:
+            payload["dataset"] = self.dataset
         if self.method == "e2vid_d3dgs":      # the network's weights are an input too
             from e2vid.weights import default_weights_path
             weights = self.overrides.get("weights") or default_weights_path()
             payload["weights_sha256"] = hashlib.sha256(Path(weights).read_bytes()).hexdigest()
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _at_speed(cfg: BenchConfig, scene: str, cell: str, speed: float | None) -> dict[str, Any]:
+    """A cell's overrides on a scene, trained at `speed`: a method that sees blurred RGB takes the speed
+    variant's blurred frames (its blur-level field set to the variant's `shutter` level)."""
+    from datagen.speed import SHUTTER_LEVEL
+    from recon.methods import get_method
+
+    key = get_method(cfg.cells[cell].method).blur_level_field
+    extra = {key: SHUTTER_LEVEL} if speed is not None and key is not None else {}
+    return {**cfg.overrides(scene, cell), **extra}
 
 
 def jobs(cfg: BenchConfig) -> list[Job]:
@@ -145,7 +216,8 @@ def jobs(cfg: BenchConfig) -> list[Job]:
     for scene in cfg.scenes:
         for name in MAIN_CELLS:
             c = cfg.cells[name]
-            out.append(Job("main", scene, name, "", c.method, c.config, cfg.overrides(scene, name)))
+            out.append(Job("main", scene, name, "", c.method, c.config, _at_speed(cfg, scene, name, cfg.cell_speed(name)),
+                           speed=cfg.cell_speed(name)))
     b = cfg.blur
     if b.scene:
         from recon.methods import get_method
@@ -154,10 +226,30 @@ def jobs(cfg: BenchConfig) -> list[Job]:
             c = cfg.cells[name]
             key = get_method(c.method).blur_level_field
             for level in b.levels:
-                if key is None:      # the method never sees RGB frames: blur cannot change it
-                    continue
-                out.append(Job("blur", b.scene, name, level, c.method, c.config,
-                               {**cfg.overrides(b.scene, name), key: level}))
+                if cfg.speed_levels:        # a level is a speed: every cell, on that variant's frames and events
+                    speed = float(cfg.speed_levels[level])
+                    out.append(Job("blur", b.scene, name, level, c.method, c.config,
+                                   _at_speed(cfg, b.scene, name, speed), speed=speed))
+                elif key is not None:       # an exposure level: events-only methods never see it
+                    out.append(Job("blur", b.scene, name, level, c.method, c.config,
+                                   {**cfg.overrides(b.scene, name), key: level}))
+    sp = cfg.speed
+    for scene in sp.scenes:
+        ref = cfg.cells["d3dgs_sharp"]        # the reference line: the main cell's run, the same at every speed
+        out.append(Job("speed", scene, "d3dgs_sharp", "sharp", ref.method, ref.config,
+                       _at_speed(cfg, scene, "d3dgs_sharp", None)))
+        for name in sp.cells:
+            c = cfg.cells[name]
+            for s in sp.speeds:
+                out.append(Job("speed", scene, name, f"x{s:g}", c.method, c.config, _at_speed(cfg, scene, name, s),
+                               speed=float(s)))
+    if sp.sensor_dataset:
+        scene = sp.scenes[0]
+        for name in sp.sensor_cells:
+            c = cfg.cells[name]
+            for s in sp.speeds:
+                out.append(Job("speed", scene, name, f"x{s:g}", c.method, c.config, _at_speed(cfg, scene, name, s),
+                               speed=float(s), dataset=sp.sensor_dataset))
     a = cfg.ablation
     if a.scene:
         c = cfg.cells[a.base]

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job
-from benchmark.runner import row_summary, run_folder
+from benchmark.runner import job_data_dir, row_summary, run_folder
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 
 
@@ -22,7 +22,7 @@ def run_group(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path
     """On a worker: check the scene's files, then train (or resume) and score each job of one folder."""
     from datagen.verify import verify_scene
 
-    scene_dir = data_root / jobs[0].scene
+    scene_dir = job_data_dir(jobs[0], data_root)
     problems = verify_scene(scene_dir)
     if problems:
         raise ValueError(f"{scene_dir} on this node does not match its manifest: {problems[0]}"

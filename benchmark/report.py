@@ -5,6 +5,7 @@ leaderboard.md/.csv/.json  the paper's Table 1 layout: per scene PSNR / SSIM / L
 accuracy_vs_time.png/.md  test PSNR against training wall-clock seconds at each snapshot
 blur.md                 the blur-robustness study (events-only methods never see RGB: one value for all levels)
 ablation.md             E-4DGS with each component switched off (the paper's Table 2 layout)
+speed.md/.png           the speed study: PSNR against motion speed, floors, crossing speeds (benchmark.speed_report)
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from benchmark.config import LABELS, MAIN_CELLS
+from benchmark.speed_report import plot_speed, speed_tables
 from common.fileio import atomic_output, write_text_atomic
 
 METRICS = (("psnr", "PSNR↑", True), ("ssim", "SSIM↑", True), ("lpips", "LPIPS↓", False))
@@ -179,18 +181,33 @@ def blur_table(rows: list[dict], levels=("mild", "medium", "strong")) -> str:
     scene = blur[0]["scene"]
     by = {(r["cell"], r["variant"]): r for r in blur}
     main = {r["cell"]: r for r in rows if r["study"] == "main" and r["scene"] == scene}
+    as_speed = any(r.get("speed") is not None for r in blur)      # levels are motion speeds
     cells = [c for c in MAIN_CELLS if c != "d3dgs_sharp" and (any(k[0] == c for k in by) or c in main)]
     md = io.StringIO()
-    md.write(f"Blur robustness on **{scene}**.\n\n| Method | " +
-             " | ".join(f"{lv} {lbl}" for lv in levels for _, lbl, _ in METRICS) + " |\n")
+    md.write(f"Blur robustness on **{scene}**.\n\n")
+    if as_speed:
+        for lv in levels:
+            data = next((r.get("data") for (c, v), r in by.items() if v == lv and (r.get("data") or {}).get("blur_median_px")),
+                        None) or {}
+            speed = next((r["speed"] for (c, v), r in by.items() if v == lv), None)
+            if speed is not None:
+                md.write(f"- {lv}: speed x{speed:g}" + (f", {data['exposure_ms']:g} ms shutter, blur {data['blur_median_px']:.1f} / "
+                                                        f"{data['blur_p90_px']:.1f} px (median / p90), blurred frames "
+                                                        f"{data['blur_psnr_db']:.1f} dB from sharp" if data else "") + "\n")
+        md.write("\n")
+    md.write("| Method | " + " | ".join(f"{lv} {lbl}" for lv in levels for _, lbl, _ in METRICS) + " |\n")
     md.write("|---|" + "---|" * (3 * len(levels)) + "\n")
     for c in cells:
         vals = []
         for lv in levels:
-            r = by.get((c, lv)) or (main.get(c) if c in ("e4dgs", "e2vid_d3dgs") else None)
+            r = by.get((c, lv)) or (main.get(c) if c in ("e4dgs", "e2vid_d3dgs") and not as_speed else None)
             vals += [_fmt(k, r[k] if r else None) for k, _, _ in METRICS]
         md.write(f"| {LABELS.get(c, c)} | " + " | ".join(vals) + " |\n")
-    md.write("\nE-4DGS (events) and E2VID + D3DGS never see the RGB frames, so one run stands for every level.\n")
+    if as_speed:
+        md.write("\nEach level is a motion speed: every method, events-only ones included, trains on that speed variant "
+                 "(its blurred frames and its events).\n")
+    else:
+        md.write("\nE-4DGS (events) and E2VID + D3DGS never see the RGB frames, so one run stands for every level.\n")
     return md.getvalue()
 
 
@@ -254,10 +271,12 @@ def write_report(rows: list[dict], out_root: Path, header: str = "") -> list[Pat
     written = []
     for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv), ("leaderboard.json", leaderboard_json(rows)),
                        ("accuracy_vs_time.md", accuracy_vs_time(rows)), ("blur.md", blur_table(rows)),
-                       ("ablation.md", ablation_table(rows))):
+                       ("ablation.md", ablation_table(rows)), ("speed.md", speed_tables(rows))):
         if text:
             write_text_atomic(out_root / name, text)
             written.append(out_root / name)
     plot_accuracy_vs_time(rows, out_root / "accuracy_vs_time.png")
     written.append(out_root / "accuracy_vs_time.png")
+    if plot_speed(rows, out_root / "speed.png"):
+        written.append(out_root / "speed.png")
     return written

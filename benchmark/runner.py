@@ -47,9 +47,18 @@ def write_results(path: Path, rows: list[dict]) -> None:
     write_text_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows))
 
 
+def job_data_dir(job: Job, data_root: Path) -> Path:
+    """The scene folder a job trains on: data_root/<scene or its speed variant>, or that folder in the
+    sibling dataset job.dataset (data/<dataset>/...)."""
+    return (data_root.parent / job.dataset if job.dataset else data_root) / job.data_scene
+
+
 def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callable[[str], None], ray=None) -> None:
-    """Generate the scenes of dataset preset `dataset` that data_root lacks (skips complete ones)."""
-    missing = [s for s in scenes if not (data_root / s / "manifest.json").exists()]
+    """Generate the scenes of dataset preset `dataset` that data_root lacks (skips complete ones).
+    `scenes` may name speed variants (garage_x4): their scene is generated, which writes them."""
+    from datagen.speed import split_variant
+
+    missing = sorted({split_variant(s)[0] for s in scenes if not (data_root / s / "manifest.json").exists()})
     if not missing:
         return
     from datagen.build import generate_dataset
@@ -77,24 +86,43 @@ def resolve_job(job: Job):
         raise ConfigError(f"bench job {job.key} ({job.method}, {job.config or 'defaults'}): {exc}") from None
 
 
+def data_stats(dataset: SceneDataset) -> dict:
+    """What the scene folder holds, for the tables: its speed, the events per second per camera (mean
+    over cameras), and for a speed variant its shutter's exposure, blur (median / p90 px) and
+    blurred-vs-sharp PSNR."""
+    m = dataset.manifest
+    rates = m.get("events_per_second_per_camera") or [0]
+    out = {"speed": (m.get("speed") or {}).get("factor", 1.0), "events_per_s_per_camera": sum(rates) / len(rates)}
+    level = ((m.get("blur") or {}).get("levels") or {}).get("shutter")
+    if level:
+        out.update(exposure_ms=level["exposure_ms"], blur_median_px=level["median_px"], blur_p90_px=level["p90_px"],
+                   blur_psnr_db=(level.get("psnr_vs_sharp_db") or {}).get("median_db"))
+    return out
+
+
 def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool, method_cfg=None) -> dict:
-    from recon.api import fit
     from recon.device import run_placement
     from recon.methods import get_method
     from recon.model import load
+    from recon.trainer import Trainer
 
     method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
-    scene_dir = data_root / job.scene
+    scene_dir = job_data_dir(job, data_root)
     run_dir = out_root / job.folder
     t0 = time.time()
-    model = fit(scene_dir, job.method, method_cfg, run_dir, progress=progress)
-    train_elapsed = time.time() - t0
     dataset = SceneDataset(scene_dir)
+    trainer = Trainer(get_method(job.method)(dataset, method_cfg), run_dir, progress)
+    untrained = trainer.initial_model()
+    model = trainer.run()
+    train_elapsed = time.time() - t0
     scorer = get_method(job.method).scorer(dataset, method_cfg)
     placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
     records = dataset.frames("test")
     t1 = time.time()
     final = evaluate_model(scorer, model, records, cfg.lpips_net, placement)
+    # the floor: what the method's own starting model scores after the same correction (an events-only
+    # score means something about events only as far as it rises above this)
+    floor = evaluate_model(scorer, untrained, records, None, placement)
     log_rows = [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
     snapshots = []
     for row in log_rows:
@@ -109,6 +137,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
         **job.identity(), **{k: final[k] for k in ("psnr", "psnr_luma", "ssim", "lpips")},
+        "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"], "data": data_stats(dataset),
         "n_test_images": final["n_images"],
         "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
         "device": str(placement[0]), "backend": placement[1],
@@ -144,10 +173,12 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     when `ray` is a common.taskpool.RayOptions (Ray is imported only then). Returns all rows."""
     todo = [j for j in jobs(cfg) if j.study in studies and (not scenes or j.scene in scenes)
             and (not cells or j.cell in cells)]
-    needed = sorted({j.scene for j in todo})
+    needed = sorted({j.data_scene for j in todo if not j.dataset})
     resolved = {j.key: resolve_job(j) for j in todo}   # every job's config, checked before any work
     t_start = time.time()
     ensure_dataset(cfg.dataset, needed, data_root, log, ray)
+    for other in sorted({j.dataset for j in todo if j.dataset}):    # the realistic-sensor variants
+        ensure_dataset(other, sorted({j.data_scene for j in todo if j.dataset == other}), data_root.parent / other, log, ray)
     dataset_s = time.time() - t_start
     out_root.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out_root / "bench.json", json.dumps({"preset": preset_name, **dump(cfg)}, indent=1))

@@ -82,7 +82,7 @@ class SceneDataset:
 
     def blurred_frames(self, level: str) -> list[FrameRecord]:
         """Training frames of a blur level; their t_us / time is the exposure centre."""
-        if level not in self.config.blur.target_px:
+        if level not in self.config.blur.levels:
             raise DatasetError(f"{self.dir}: no blur level {level!r} (have: {', '.join(self.blur_levels()) or 'none'})")
         exposures = read_json(self.dir / "blur" / level / "exposures.json")
         spans = {(e["camera"], e["index"]): (e["first_frame_us"], e["last_frame_us"]) for e in exposures}

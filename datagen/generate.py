@@ -150,6 +150,7 @@ class SceneJob:
             for part in ("frames", "rgb", "gray"):        # the same sharp frames: hard links where possible
                 link_tree(self.dir / part, variant.dir / part)
             secs["write"] += time.perf_counter() - t0
+            secs["total"] = secs["simulate"] + secs["write"]      # its own work; the render is the scene's
             variant._write_metadata(secs)
         self._write_metadata(seconds[0])
         ckpt.remove()

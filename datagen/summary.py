@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from datagen.speed import split_variant
+
 
 def blur_table(root: Path, scenes: list[str] | None = None) -> str:
     """Per scene and blur level: target, exposure, measured blur (median / p90 px over geometry,
@@ -13,7 +15,7 @@ def blur_table(root: Path, scenes: list[str] | None = None) -> str:
              "PSNR vs sharp dB | px per frame median / p90 | events/s per camera (M) |", "|" + "---|" * 9]
     rows = []
     for d in sorted(p for p in Path(root).iterdir() if (p / "manifest.json").exists()):
-        if scenes is not None and d.name not in scenes:
+        if scenes is not None and split_variant(d.name)[0] not in scenes:     # a scene's speed variants with it
             continue
         m = json.loads((d / "manifest.json").read_text())
         blur = m.get("blur") or {}

@@ -139,6 +139,10 @@ class Trainer:
         self.method.setup_model(model)
         return model.to(self.device)
 
+    def initial_model(self) -> DynamicGaussians:
+        """The untrained model a fresh run starts from (deterministic: the run builds the same one)."""
+        return self._new_model()
+
     def setup(self) -> None:
         """A fresh model, its optimizer and densification statistics (iteration 0)."""
         self.model = self._new_model()

@@ -1,0 +1,100 @@
+"""The speed study: its jobs from a preset, the crossing speed solved by hand, and its tables and plot
+built from results rows."""
+import json
+import math
+
+import pytest
+
+from benchmark.config import LABELS, MAIN_CELLS, BenchConfig, CellSpec, jobs
+from benchmark.report import write_report
+from benchmark.speed_report import crossing_speed, speed_tables
+from common.config import ConfigError, build_config
+
+CELLS = {c: CellSpec({"d3dgs_sharp": "d3dgs", "d3dgs_blur": "d3dgs", "deblur_d3dgs": "deblur_d3dgs",
+                      "e2vid_d3dgs": "e2vid_d3dgs", "e4dgs": "e4dgs", "e4dgs_rgb": "e4dgs_rgb"}[c]) for c in MAIN_CELLS}
+
+
+def _cfg(**extra) -> BenchConfig:
+    cells = {**CELLS, "d3dgs_blur": CellSpec("d3dgs", speed="mild"), "e4dgs": CellSpec("e4dgs", speed="mild"),
+             "e4dgs_rgb": CellSpec("e4dgs_rgb", speed="mild")}
+    raw = {"scenes": ["g", "h"], "cells": cells, "speed_levels": {"mild": 6.0, "medium": 8.0, "strong": 20.0},
+           "blur": {"scene": "h", "cells": ["d3dgs_blur", "e4dgs"]},
+           "speed": {"scenes": ["g"], "speeds": [1, 6, 20], "cells": ["d3dgs_blur", "e4dgs"]}, **extra}
+    return build_config(BenchConfig, raw)
+
+
+def test_cells_at_a_speed_level_train_on_that_variant_and_its_shutter_frames():
+    by = {j.key: j for j in jobs(_cfg())}
+    main = by["main/g/d3dgs_blur"]
+    assert main.speed == 6.0 and main.data_scene == "g_x6" and main.overrides == {"frames": "shutter"}
+    assert by["main/g/e4dgs_rgb"].overrides == {"rgb_frames": "shutter"}       # its own blur-level field
+    assert by["main/g/e4dgs"].data_scene == "g_x6" and by["main/g/e4dgs"].overrides == {}
+    assert by["main/g/d3dgs_sharp"].speed is None and by["main/g/d3dgs_sharp"].data_scene == "g"
+    # the blur study's levels are speeds: events-only cells are trained at each level too
+    assert by["blur/h/e4dgs/strong"].data_scene == "h_x20" and by["blur/h/d3dgs_blur/medium"].data_scene == "h_x8"
+    # the speed study's point at the mild speed is the main cell's training folder: trained once
+    assert by["speed/g/d3dgs_blur/x6"].folder == main.folder and by["speed/g/e4dgs/x6"].folder == by["main/g/e4dgs"].folder
+    assert by["speed/g/d3dgs_blur/x1"].folder != main.folder and by["speed/g/d3dgs_blur/x1"].data_scene == "g_x1"
+    assert sum(j.study == "speed" for j in jobs(_cfg())) == 6 + 1      # and the sharp reference
+    assert by["speed/g/d3dgs_sharp/sharp"].folder == by["main/g/d3dgs_sharp"].folder
+
+
+def test_speed_settings_are_checked_when_loaded():
+    with pytest.raises(ConfigError, match=r"cells.d3dgs_blur.speed: 'fast' is not one of speed_levels"):
+        build_config(BenchConfig, {"scenes": ["g"], "cells": {**CELLS, "d3dgs_blur": CellSpec("d3dgs", speed="fast")}})
+    with pytest.raises(ConfigError, match=r"speed.speeds: expected distinct speed factors >= 1"):
+        _cfg(speed={"scenes": ["g"], "speeds": [0.5, 2]})
+    with pytest.raises(ConfigError, match=r"blur.levels: 'medium' is not one of speed_levels"):
+        _cfg(speed_levels={"mild": 6.0, "strong": 20.0})
+
+
+def test_realistic_sensor_jobs_train_on_the_other_dataset():
+    cfg = _cfg(speed={"scenes": ["g"], "speeds": [1, 6], "cells": ["d3dgs_blur"], "sensor_dataset": "quick_dvs",
+                      "sensor_cells": ["e4dgs"]})
+    sensor = [j for j in jobs(cfg) if j.dataset]
+    assert [j.key for j in sensor] == ["speed/quick_dvs/g/e4dgs/x1", "speed/quick_dvs/g/e4dgs/x6"]
+    assert sensor[1].folder.startswith("quick_dvs/g_x6/") and sensor[1].config_hash() != \
+        next(j for j in jobs(cfg) if j.key == "main/g/e4dgs").config_hash()
+
+
+def test_crossing_speed_is_interpolated_in_log_speed():
+    # behind by 0.5 at x2, ahead by 0.5 at x4: the difference is zero half-way in log speed, at 2 * sqrt(2)
+    s, how = crossing_speed([1, 2, 4, 8], [-1.0, -0.5, 0.5, 1.0])
+    assert how == "crosses" and s == pytest.approx(2 * math.sqrt(2))
+    assert crossing_speed([1, 2, 4], [0.1, 0.2, 0.3]) == (1, "ahead at every speed")
+    assert crossing_speed([1, 2, 4], [-0.1, 0.2, -0.3]) == (None, "never ahead")
+    s, how = crossing_speed([1, 2, 4, 8], [0.5, -0.5, -1.0, 3.0])     # ahead, behind, then ahead for good
+    assert how == "crosses" and s == pytest.approx(4 * 2 ** (1 / 4))
+    assert crossing_speed([1, 2], [None, None]) == (None, "no data")
+
+
+def _row(study, scene, cell, psnr, speed=None, floor=18.0, variant=""):
+    return {"key": f"{study}/{scene}/{cell}/{variant}", "study": study, "scene": scene, "cell": cell, "variant": variant,
+            "seed": None, "speed": speed, "dataset": "", "psnr": psnr, "psnr_luma": psnr + 1.0, "ssim": 0.8, "lpips": 0.3,
+            "floor_psnr": floor, "floor_psnr_luma": floor + 1.0, "wall_s": 100.0, "iterations": 10, "n_gaussians": 5,
+            "snapshots": [], "data": {"speed": speed or 1.0, "events_per_s_per_camera": 5e7 * (speed or 1),
+                                      "blur_median_px": 3.0 * (speed or 1), "blur_p90_px": 5.0 * (speed or 1),
+                                      "blur_psnr_db": 33.0 - (speed or 1)}}
+
+
+def test_speed_tables_and_plot_from_rows(tmp_path):
+    rows = [_row("main", "g", c, 20.0) for c in MAIN_CELLS]
+    rows[0]["psnr"] = 21.0                                      # the sharp reference line
+    for s, rgb, ev in ((1, 20.5, 19.0), (2, 20.0, 19.5), (4, 18.0, 19.2), (8, 16.0, 18.5)):
+        rows += [_row("speed", "g", "d3dgs_blur", rgb, s, variant=f"x{s}"),
+                 _row("speed", "g", "e4dgs", ev, s, floor=18.5 if s < 8 else 18.0, variant=f"x{s}")]
+    (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    write_report(rows, tmp_path, "# t")
+    md = (tmp_path / "speed.md").read_text()
+    assert md == speed_tables(rows) and (tmp_path / "speed.png").stat().st_size > 1000
+    assert "x4: 12 / 20 px, 29.0 dB, 200 Mev/s" in md
+    ref = next(l for l in md.splitlines() if l.startswith(f"| {LABELS['d3dgs_sharp']} (reference) |"))
+    assert ref.count("21.00") == 4
+    e4 = next(l for l in md.splitlines() if l.startswith(f"| {LABELS['e4dgs']} |"))
+    assert e4 == f"| {LABELS['e4dgs']} | 19.00 (18.50) | 19.50 (18.50) | 19.20 (18.50) | 18.50 (18.00) |"
+    # behind by 0.5 at x2, ahead by 1.2 at x4: crosses at 2 * 2^(0.5 / 1.7); at x4 only 0.7 dB above its floor
+    s_x = 2 * 2 ** (0.5 / 1.7)
+    assert f"E-4DGS (events): overtakes it at x{s_x:.3g}; at x4 it is 0.70 dB above its floor (rests on the floor)." \
+        .replace("E-4DGS (events)", LABELS["e4dgs"]) in md
+    assert md.count("overtakes it at") == 2                       # paper protocol and luma (same differences)
+
