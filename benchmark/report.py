@@ -106,7 +106,13 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> 
              "values over each scene's held-out views; events-only methods (E-4DGS, E2VID + D3DGS) are scored "
              "against grayscale ground truth after their log-intensity gain (>= 0) / offset correction, RGB methods "
              "against RGB. Train time: training-only wall-clock seconds, mean over scenes.\n")
+    speeds = sorted({(LABELS.get(c, c), table[c][s]["speed"]) for c in cells for s in scenes
+                     if table[c].get(s, {}).get("speed") is not None})
+    if speeds:
+        md.write("Speed variants: " + "; ".join(f"{label} at x{sp:g}" for label, sp in speeds) + " (the same motion "
+                 "x times faster; its blurred frames and its events). The others train on the scene at speed 1.\n")
     md.write(luma_table(scenes, table, cells))
+    md.write(floor_table(scenes, table, cells))
     if len(scenes) > 1:
         md.write("\n### Per scene\n\n| Scene | Method | PSNR↑ | SSIM↑ | LPIPS↓ | Iterations | Train (s) | Gaussians |\n"
                  "|---|---|---|---|---|---|---|---|\n")
@@ -118,6 +124,27 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> 
                              f"{_fmt('lpips', r['lpips'])} | {r['iterations']} | {r['wall_s']:.0f} | {r['n_gaussians']} |\n")
     md.write(failed_section(list(failed)))
     return md.getvalue(), out_csv.getvalue()
+
+
+def floor_table(scenes: list[str], table, cells: list[str]) -> str:
+    """Every score next to its method's untrained floor: PSNR and floor (paper protocol, then luma)
+    per scene. A score says something about what a method learned only as far as it is above it."""
+    if not any(table[c].get(s, {}).get("floor_psnr") is not None for c in cells for s in scenes):
+        return ""
+    md = io.StringIO()
+    md.write("\n### Above the untrained floor\n\n| Method | " + " | ".join(f"{s} PSNR (floor)" for s in scenes)
+             + " | " + " | ".join(f"{s} luma (floor)" for s in scenes) + " |\n|---|" + "---|" * (2 * len(scenes)) + "\n")
+    for c in cells:
+        vals = []
+        for key, floor in (("psnr", "floor_psnr"), ("psnr_luma", "floor_psnr_luma")):
+            for s in scenes:
+                r = table[c].get(s) or {}
+                vals.append(f"{_fmt('psnr', r.get(key))} ({_fmt('psnr', r.get(floor))})" if r.get(floor) is not None
+                            else _fmt("psnr", r.get(key)))
+        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(vals) + " |\n")
+    md.write("\nFloor: the method's own starting model (its initial points, nothing trained) scored the same way, after "
+             "the same correction. For events-only methods the gain / offset fit alone lifts a flat image to it.\n")
+    return md.getvalue()
 
 
 def luma_table(scenes: list[str], table, cells: list[str]) -> str:

@@ -98,3 +98,31 @@ def test_speed_tables_and_plot_from_rows(tmp_path):
         .replace("E-4DGS (events)", LABELS["e4dgs"]) in md
     assert md.count("overtakes it at") == 2                       # paper protocol and luma (same differences)
 
+
+
+def test_leaderboard_puts_every_score_next_to_its_floor_and_names_the_speeds(tmp_path):
+    rows = [_row("main", "g", c, 20.0 + k, speed=6.0 if c != "d3dgs_sharp" else None, floor=10.0 + k)
+            for k, c in enumerate(MAIN_CELLS)]
+    write_report(rows, tmp_path, "# t")
+    md = (tmp_path / "leaderboard.md").read_text()
+    floors = md.split("### Above the untrained floor")[1]
+    e4 = next(l for l in floors.splitlines() if l.startswith(f"| {LABELS['e4dgs']} |"))
+    assert e4 == f"| {LABELS['e4dgs']} | 24.00 (14.00) | 25.00 (15.00) |"
+    assert f"{LABELS['d3dgs_blur']} at x6" in md and f"{LABELS['d3dgs_sharp']} at" not in md
+
+
+def test_level_speeds_are_interpolated_in_log_speed_and_out_of_reach_is_said():
+    from benchmark.calibrate import PAPER_GARAGE_COST_DB, costs_from_rows, level_speed
+
+    costs = [(1, -0.1), (16, 0.0), (32, 0.5), (64, 2.5)]
+    # 1.5 dB is half-way from 0.5 (x32) to 2.5 (x64): x32 * 2^0.5
+    assert level_speed(costs, 1.5) == (pytest.approx(32 * math.sqrt(2)), "interpolated")
+    assert level_speed(costs, 2.5) == (64, "measured")
+    assert level_speed(costs, 3.0) == (None, "out of reach")
+    assert PAPER_GARAGE_COST_DB["mild"] == pytest.approx(1.31) and PAPER_GARAGE_COST_DB["strong"] == pytest.approx(3.38)
+    rows = [_row("main", "g", "d3dgs_sharp", 20.0), _row("speed", "g", "d3dgs_blur", 19.5, 4),
+            _row("speed", "g", "d3dgs_blur", 20.5, 1), {**_row("speed", "g", "d3dgs_blur", 1.0, 8), "dataset": "other"}]
+    ref, got = costs_from_rows(rows, "g")
+    assert ref == 20.0 and [(s, c) for s, c, _ in got] == [(1.0, -0.5), (4.0, 0.5)]
+    with pytest.raises(ValueError, match="no D3DGS \\(sharp RGB\\) row for scene 'h'"):
+        costs_from_rows(rows, "h")
