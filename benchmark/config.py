@@ -48,14 +48,18 @@ class SpeedStudy:
     """Every cell at every speed factor on each scene (`e4dgs bench --studies speed`): the speed
     variants <scene>_x<s> of the dataset. d3dgs_sharp (the main cell: the sharp frames are the same at
     every speed) is the reference line. `sensor_scene` is also run with the speed variants of a
-    realistic sensor (`sensor_dataset`, a dataset preset whose scenes declare one)."""
+    realistic sensor (`sensor_dataset`, a dataset preset whose scene declares one)."""
     scenes: tuple[str, ...] = ()          # () : no speed study
     speeds: tuple[float, ...] = ()
     cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
     sensor_dataset: str = ""              # "" : no realistic-sensor run
+    sensor_scene: str = ""                # the scene run on it ("": the first of `scenes`)
     sensor_cells: tuple[str, ...] = ("e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+    lpips: bool = False                   # its tables read PSNR: its own runs skip LPIPS unless asked
 
     def __post_init__(self):
+        if self.sensor_scene and self.sensor_scene not in self.scenes:
+            raise ConfigError(f"speed.sensor_scene: {self.sensor_scene!r} is not one of speed.scenes")
         if self.scenes and not self.speeds:
             raise ConfigError("speed.speeds: expected the speed factors of the study")
         if any(not s >= 1 for s in self.speeds) or len(set(self.speeds)) != len(self.speeds):
@@ -112,7 +116,7 @@ class BenchConfig:
             if c.speed and c.speed not in self.speed_levels:
                 raise ConfigError(f"cells.{name}.speed: {c.speed!r} is not one of speed_levels "
                                   f"({', '.join(self.speed_levels) or 'none declared'})")
-        if self.speed_levels:
+        if self.speed_levels and self.blur.scene:
             for level in self.blur.levels:
                 if level not in self.speed_levels:
                     raise ConfigError(f"blur.levels: {level!r} is not one of speed_levels ({', '.join(self.speed_levels)})")
@@ -244,7 +248,7 @@ def jobs(cfg: BenchConfig) -> list[Job]:
                 out.append(Job("speed", scene, name, f"x{s:g}", c.method, c.config, _at_speed(cfg, scene, name, s),
                                speed=float(s)))
     if sp.sensor_dataset:
-        scene = sp.scenes[0]
+        scene = sp.sensor_scene or sp.scenes[0]
         for name in sp.sensor_cells:
             c = cfg.cells[name]
             for s in sp.speeds:

@@ -119,7 +119,9 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
     records = dataset.frames("test")
     t1 = time.time()
-    final = evaluate_model(scorer, model, records, cfg.lpips_net, placement)
+    # the speed study reads PSNR only: its own runs skip LPIPS-VGG (~30 s of a task) unless speed.lpips
+    lpips_net = None if job.study == "speed" and not cfg.speed.lpips else cfg.lpips_net
+    final = evaluate_model(scorer, model, records, lpips_net, placement)
     # the floor: what the method's own starting model scores after the same correction (an events-only
     # score means something about events only as far as it rises above this)
     floor = evaluate_model(scorer, untrained, records, None, placement)
@@ -136,14 +138,14 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
-        **job.identity(), **{k: final[k] for k in ("psnr", "psnr_luma", "ssim", "lpips")},
+        **job.identity(), **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
         "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"], "data": data_stats(dataset),
         "n_test_images": final["n_images"],
         "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
         "device": str(placement[0]), "backend": placement[1],
         "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),
         "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
-        "versions": versions(), "git_commit": git_commit(), "lpips_net": cfg.lpips_net,
+        "versions": versions(), "git_commit": git_commit(), "lpips_net": lpips_net,
     }
 
 
@@ -162,8 +164,8 @@ def run_folder(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Pat
 
 
 def row_summary(row: dict) -> str:
-    return (f"{row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f} LPIPS {row['lpips']:.3f}, "
-            f"{row['wall_s']:.0f} s training")
+    lpips = f" LPIPS {row['lpips']:.3f}" if row.get("lpips") is not None else ""
+    return f"{row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f}{lpips}, {row['wall_s']:.0f} s training"
 
 
 def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,

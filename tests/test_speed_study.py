@@ -49,10 +49,12 @@ def test_speed_settings_are_checked_when_loaded():
 
 
 def test_realistic_sensor_jobs_train_on_the_other_dataset():
-    cfg = _cfg(speed={"scenes": ["g"], "speeds": [1, 6], "cells": ["d3dgs_blur"], "sensor_dataset": "quick_dvs",
-                      "sensor_cells": ["e4dgs"]})
+    cfg = _cfg(speed={"scenes": ["h", "g"], "speeds": [1, 6], "cells": ["d3dgs_blur"], "sensor_dataset": "quick_dvs",
+                      "sensor_scene": "g", "sensor_cells": ["e4dgs"]})
     sensor = [j for j in jobs(cfg) if j.dataset]
     assert [j.key for j in sensor] == ["speed/quick_dvs/g/e4dgs/x1", "speed/quick_dvs/g/e4dgs/x6"]
+    with pytest.raises(ConfigError, match="speed.sensor_scene: 'x' is not one of speed.scenes"):
+        _cfg(speed={"scenes": ["g"], "speeds": [1], "sensor_dataset": "d", "sensor_scene": "x"})
     assert sensor[1].folder.startswith("quick_dvs/g_x6/") and sensor[1].config_hash() != \
         next(j for j in jobs(cfg) if j.key == "main/g/e4dgs").config_hash()
 
@@ -126,3 +128,47 @@ def test_level_speeds_are_interpolated_in_log_speed_and_out_of_reach_is_said():
     assert ref == 20.0 and [(s, c) for s, c, _ in got] == [(1.0, -0.5), (4.0, 0.5)]
     with pytest.raises(ValueError, match="no D3DGS \\(sharp RGB\\) row for scene 'h'"):
         costs_from_rows(rows, "h")
+
+
+def test_speed_study_end_to_end_on_the_tiny_scene(tmp_path):
+    """Speed variants of the tiny scene, a preset whose blurred cells train at a speed level and a
+    speed study over two speeds: every row carries its floor and its data; the study's own runs skip
+    LPIPS; the tables come out."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from benchmark.runner import read_results, run_bench
+
+    root = Path(__file__).resolve().parent.parent
+    preset = tmp_path / "tiny_speed.yaml"
+    preset.write_text((root / "configs" / "dataset_tiny_motion.yaml").read_text()
+                      + "  speeds: {factors: [1, 3], exposure_ms: 1.0, max_px_per_frame: 10.0}\n")
+    data = tmp_path / "data"
+    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(preset),
+                        "--out", str(data), "--no-progress"], capture_output=True, text=True, cwd=root)
+    assert r.returncode == 0, r.stderr
+    tiny = {"train.iterations": 8, "train.scale_schedule": False, "train.warm_up": 200, "train.densify.enabled": False,
+            "train.init.n_points_object": 200, "train.snapshots": [1.0]}
+    cells = {c: CellSpec(spec.method, overrides=tiny, speed="" if c == "d3dgs_sharp" else "fast")
+             for c, spec in CELLS.items()}
+    cells["d3dgs_sharp"] = CellSpec("d3dgs", overrides={**tiny, "frames": "sharp"})
+    cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": ["cubes"], "cells": cells,
+                                     "speed_levels": {"fast": 3}, "lpips_net": "alex",
+                                     "speed": {"scenes": ["cubes"], "speeds": [1, 3], "cells": ["d3dgs_blur", "e4dgs"]}})
+    out = tmp_path / "runs"
+    run_bench(cfg, "tiny", data, out, cells=["d3dgs_sharp", "d3dgs_blur", "e4dgs"], studies=("main", "speed"),
+              progress=False, log=lambda s: None)
+    rows = {row["key"]: row for row in read_results(out / "results.jsonl")}
+    blur_main, blur_x1 = rows["main/cubes/d3dgs_blur"], rows["speed/cubes/d3dgs_blur/x1"]
+    assert blur_main["run_dir"].startswith("cubes_x3/") and blur_main["data"]["speed"] == 3.0
+    assert blur_main["lpips"] is not None and blur_x1["lpips"] is None          # the study reads PSNR only
+    assert rows["speed/cubes/d3dgs_blur/x3"]["scored_as"] == "main/cubes/d3dgs_blur"   # trained once
+    # 1 ms at 3000 FPS * s: 3 and 9 rendered frames; the blur grows with the speed
+    assert blur_main["data"]["blur_median_px"] > 2 * blur_x1["data"]["blur_median_px"] > 0
+    for row in rows.values():
+        assert math.isfinite(row["floor_psnr"]) and math.isfinite(row["floor_psnr_luma"])
+    e4 = rows["speed/cubes/e4dgs/x3"]
+    assert e4["data"]["events_per_s_per_camera"] == pytest.approx(3 * rows["speed/cubes/e4dgs/x1"]["data"]["events_per_s_per_camera"], rel=0.02)
+    write_report(list(rows.values()), out)
+    assert "## cubes" in (out / "speed.md").read_text() and (out / "speed.png").exists()
