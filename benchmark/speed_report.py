@@ -126,8 +126,9 @@ def crossing_lines(cells: dict[str, dict[float, dict]], speeds: list[float], key
             lines.append(f"- {label}: no speed with both it and {LABELS[RGB_REFERENCE]}.")
             continue
         if how == "never ahead":
+            s_last, d_last = [(s, d) for s, d in zip(speeds, ahead) if d is not None][-1]
             lines.append(f"- {label}: does not overtake {LABELS[RGB_REFERENCE]} within the sweep "
-                         f"(x{speeds[0]:g}-x{speeds[-1]:g}; at x{speeds[-1]:g} {ahead[-1]:+.2f} dB).")
+                         f"(up to x{s_last:g}, where it is {d_last:+.2f} dB).")
             continue
         first = next(s for s, d in zip(speeds, ahead) if d is not None and d > 0 and s >= s_x - 1e-9)
         row = cells[cell][first]

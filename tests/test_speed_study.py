@@ -68,6 +68,7 @@ def test_crossing_speed_is_interpolated_in_log_speed():
     s, how = crossing_speed([1, 2, 4, 8], [0.5, -0.5, -1.0, 3.0])     # ahead, behind, then ahead for good
     assert how == "crosses" and s == pytest.approx(4 * 2 ** (1 / 4))
     assert crossing_speed([1, 2], [None, None]) == (None, "no data")
+    assert crossing_speed([1, 2, 4], [-0.5, -0.2, None]) == (None, "never ahead")   # no row at x4
 
 
 def _row(study, scene, cell, psnr, speed=None, floor=18.0, variant=""):
@@ -99,6 +100,11 @@ def test_speed_tables_and_plot_from_rows(tmp_path):
     assert f"E-4DGS (events): overtakes it at x{s_x:.3g}; at x4 it is 0.70 dB above its floor (rests on the floor)." \
         .replace("E-4DGS (events)", LABELS["e4dgs"]) in md
     assert md.count("overtakes it at") == 2                       # paper protocol and luma (same differences)
+    rows.append(_row("speed", "g", "d3dgs_blur", 30.0, 16, variant="x16"))   # a speed with no event run, RGB far ahead
+    rows += [_row("speed", "g", "e2vid_d3dgs", 10.0, s, variant=f"x{s}") for s in (1, 2)]
+    md = speed_tables(rows)
+    assert f"- {LABELS['e2vid_d3dgs']}: does not overtake {LABELS['d3dgs_blur']} within the sweep (up to x2, where it " \
+           f"is -10.00 dB)." in md
 
 
 
