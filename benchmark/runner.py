@@ -100,6 +100,12 @@ def data_stats(dataset: SceneDataset) -> dict:
     return out
 
 
+def wants_lpips(job: Job, cfg: BenchConfig) -> bool:
+    """Whether a job's row needs LPIPS: the speed study reads PSNR only, so its own runs skip LPIPS-VGG
+    (~30 s of a task) unless speed.lpips; a row without it is not reused for a job that needs it."""
+    return not (job.study == "speed" and not cfg.speed.lpips)
+
+
 def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool, method_cfg=None) -> dict:
     from recon.device import run_placement
     from recon.methods import get_method
@@ -119,8 +125,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
     records = dataset.frames("test")
     t1 = time.time()
-    # the speed study reads PSNR only: its own runs skip LPIPS-VGG (~30 s of a task) unless speed.lpips
-    lpips_net = None if job.study == "speed" and not cfg.speed.lpips else cfg.lpips_net
+    lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
     final = evaluate_model(scorer, model, records, lpips_net, placement)
     # the floor: what the method's own starting model scores after the same correction (an events-only
     # score means something about events only as far as it rises above this)
@@ -158,7 +163,10 @@ def reused_row(job: Job, row: dict) -> dict:
 
 def run_folder(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool,
                method_cfgs: list) -> list[dict]:
-    """Train and score the first of `jobs` (which share one training folder); the rest reuse its row."""
+    """Train and score the first of `jobs` (which share one training folder; one that needs LPIPS goes
+    first), the rest reuse its row."""
+    order = sorted(range(len(jobs)), key=lambda i: not wants_lpips(jobs[i], cfg))
+    jobs, method_cfgs = [jobs[i] for i in order], [method_cfgs[i] for i in order]
     first = run_job(jobs[0], cfg, data_root, out_root, progress, method_cfg=method_cfgs[0])
     return [first] + [reused_row(job, first) for job in jobs[1:]]
 
@@ -200,7 +208,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
 
     def scored(job: Job) -> dict | None:   # a finished row of the same training folder, if any
         return next((r for r in rows if r.get("run_dir") == job.folder and r.get("config_hash") == job.config_hash()
-                     and r.get("status") != "failed"), None)
+                     and r.get("status") != "failed" and (r.get("lpips") is not None or not wants_lpips(job, cfg))), None)
 
     t0 = time.time()
     remaining = [j for j in todo if (j.key, j.config_hash()) not in done]
