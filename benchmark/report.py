@@ -298,7 +298,7 @@ def write_report(rows: list[dict], out_root: Path, header: str = "") -> list[Pat
     written = []
     for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv), ("leaderboard.json", leaderboard_json(rows)),
                        ("accuracy_vs_time.md", accuracy_vs_time(rows)), ("blur.md", blur_table(rows)),
-                       ("ablation.md", ablation_table(rows)), ("speed.md", speed_tables(rows))):
+                       ("ablation.md", ablation_table(rows)), ("speed.md", speed_tables(rows + failed))):
         if text:
             write_text_atomic(out_root / name, text)
             written.append(out_root / name)

@@ -33,6 +33,11 @@ def speed_grid(rows: list[dict]) -> dict[tuple[str, str], dict[str, dict[float, 
     return grid
 
 
+def _ok(cells: dict[str, dict[float, dict]]) -> dict[str, dict[float, dict]]:
+    """The cells' rows without the failed ones (which have no scores)."""
+    return {c: {s: r for s, r in v.items() if r.get("status") != "failed"} for c, v in cells.items()}
+
+
 def crossing_speed(speeds: list[float], ahead_db: list[float | None]) -> tuple[float | None, str]:
     """The speed at which `ahead_db` (event method minus RGB method, per speed in increasing order)
     turns positive for good: interpolated in log speed between the last sweep point behind and the
@@ -94,6 +99,9 @@ def speed_tables(rows: list[dict]) -> str:
              "scene's sensor). Each score is followed by its method's untrained floor in brackets (the starting model "
              "scored after the same correction). Reference: D3DGS on the sharp frames, the same at every speed.\n")
     for (dataset, scene), cells in sorted(grid.items()):
+        if dataset and RGB_REFERENCE not in cells and RGB_REFERENCE in grid.get(("", scene), {}):
+            # another sensor sees the same frames: the RGB methods' runs of the scene are its reference
+            cells = {RGB_REFERENCE: grid[("", scene)][RGB_REFERENCE], **cells}
         speeds = sorted({s for c in cells.values() for s in c})
         title = f"{scene}" + (f", sensor of dataset `{dataset}`" if dataset else "")
         md.write(f"\n## {title}\n\nPer speed: blur median / p90, blurred vs sharp PSNR, events per second per camera: "
@@ -102,13 +110,17 @@ def speed_tables(rows: list[dict]) -> str:
             md.write(f"\n**PSNR, {what}** (dB; floor in brackets)\n\n| Method | " + " | ".join(f"x{s:g}" for s in speeds)
                      + " |\n|---|" + "---|" * len(speeds) + "\n")
             ref = sharp.get(scene)
-            if ref is not None and not dataset:
+            if ref is not None:
                 md.write(f"| {LABELS['d3dgs_sharp']} (reference) | " + " | ".join(_fmt(ref.get(key)) for _ in speeds) + " |\n")
             for cell in [c for c in LABELS if c in cells]:
-                vals = [_fmt(cells[cell][s].get(key), cells[cell][s].get(floor_key)) if s in cells[cell] else "–"
+                vals = [("failed" if cells[cell][s].get("status") == "failed" else
+                         _fmt(cells[cell][s].get(key), cells[cell][s].get(floor_key))) if s in cells[cell] else "–"
                         for s in speeds]
                 md.write(f"| {LABELS[cell]} | " + " | ".join(vals) + " |\n")
-            md.write("\n" + crossing_lines(cells, speeds, key, floor_key) + "\n")
+            md.write("\n" + crossing_lines(_ok(cells), speeds, key, floor_key) + "\n")
+        failed = [(c, s, r) for c, v in cells.items() for s, r in sorted(v.items()) if r.get("status") == "failed"]
+        for c, s, r in failed:
+            md.write(f"- failed: {LABELS.get(c, c)} at x{s:g}: {' '.join(str(r.get('error', '')).split())}\n")
     md.write(f"\nA crossing rests on the floor when the event method is less than {FLOOR_MARGIN_DB:g} dB above its "
              "untrained floor at the first speed it is ahead: the RGB method fell to it, the events taught little.\n")
     return md.getvalue()
@@ -144,7 +156,7 @@ def crossing_lines(cells: dict[str, dict[float, dict]], speeds: list[float], key
 def plot_speed(rows: list[dict], path: Path) -> bool:
     """speed.png: PSNR (paper protocol) against speed per scene, blur px on a second axis, D3DGS on
     sharp frames as the reference line. False when there is no speed study."""
-    grid = {k: v for k, v in speed_grid(rows).items() if not k[0]}
+    grid = {k: _ok(v) for k, v in speed_grid(rows).items() if not k[0]}
     if not grid:
         return False
     import matplotlib

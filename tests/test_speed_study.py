@@ -102,7 +102,17 @@ def test_speed_tables_and_plot_from_rows(tmp_path):
     assert md.count("overtakes it at") == 2                       # paper protocol and luma (same differences)
     rows.append(_row("speed", "g", "d3dgs_blur", 30.0, 16, variant="x16"))   # a speed with no event run, RGB far ahead
     rows += [_row("speed", "g", "e2vid_d3dgs", 10.0, s, variant=f"x{s}") for s in (1, 2)]
+    rows.append({"key": "speed/g/e4dgs/x16", "study": "speed", "scene": "g", "cell": "e4dgs", "speed": 16.0,
+                 "dataset": "", "status": "failed", "error": "ValueError: no events"})
     md = speed_tables(rows)
+    assert f"- failed: {LABELS['e4dgs']} at x16: ValueError: no events" in md
+    rows.append({**_row("speed", "g", "e4dgs", 17.0, 8, floor=16.5, variant="x8"), "dataset": "dvs"})
+    dvs = speed_tables(rows).split("sensor of dataset `dvs`")[1]
+    # the same frames: the scene's blurred-RGB run is the other sensor's reference (16.0 at x8: 1 dB behind it)
+    assert f"| {LABELS['d3dgs_blur']} |" in dvs and f"{LABELS['e4dgs']}: ahead at every speed of the sweep; at x8 " \
+           f"it is 0.50 dB above its floor (rests on the floor)." in dvs
+    e4 = next(l for l in md.splitlines() if l.startswith(f"| {LABELS['e4dgs']} |"))
+    assert e4.endswith("| failed |")
     assert f"- {LABELS['e2vid_d3dgs']}: does not overtake {LABELS['d3dgs_blur']} within the sweep (up to x2, where it " \
            f"is -10.00 dB)." in md
 
