@@ -183,7 +183,7 @@ def plot_speed(rows: list[dict], path: Path) -> bool:
             ax2 = ax.twinx()
             ax2.plot([s for s, _ in blur], [b for _, b in blur], ":", color="grey", label="blur (median px)")
             ax2.set_ylabel("blur, median px (dotted)", color="grey")
-        ax.set_xticks(speeds, [f"x{s:g}" for s in speeds])
+        ax.set_xticks(speeds, [f"x{s:g}" for s in speeds], rotation=60, fontsize=7)
     axes[0][0].legend(fontsize=6, loc="lower left")
     fig.tight_layout()
     with atomic_output(path) as tmp:
