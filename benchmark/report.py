@@ -218,7 +218,7 @@ def blur_table(rows: list[dict], levels=("mild", "medium", "strong")) -> str:
                         None) or {}
             speed = next((r["speed"] for (c, v), r in by.items() if v == lv), None)
             if speed is not None:
-                md.write(f"- {lv}: speed x{speed:g}" + (f", {data['exposure_ms']:g} ms shutter, blur {data['blur_median_px']:.1f} / "
+                md.write(f"- {lv}: speed x{speed:g}" + (f", {data['exposure_ms']:.2f} ms shutter, blur {data['blur_median_px']:.1f} / "
                                                         f"{data['blur_p90_px']:.1f} px (median / p90), blurred frames "
                                                         f"{data['blur_psnr_db']:.1f} dB from sharp" if data else "") + "\n")
         md.write("\n")
