@@ -218,9 +218,14 @@ def blur_table(rows: list[dict], levels=("mild", "medium", "strong")) -> str:
                         None) or {}
             speed = next((r["speed"] for (c, v), r in by.items() if v == lv), None)
             if speed is not None:
-                md.write(f"- {lv}: speed x{speed:g}" + (f", {data['exposure_ms']:.2f} ms shutter, blur {data['blur_median_px']:.1f} / "
-                                                        f"{data['blur_p90_px']:.1f} px (median / p90), blurred frames "
-                                                        f"{data['blur_psnr_db']:.1f} dB from sharp" if data else "") + "\n")
+                parts = [f"speed x{speed:g}"]
+                if data.get("exposure_ms") is not None:
+                    parts.append(f"{data['exposure_ms']:.2f} ms shutter")
+                if data.get("blur_median_px") is not None:
+                    parts.append(f"blur {data['blur_median_px']:.1f} / {data['blur_p90_px']:.1f} px (median / p90)")
+                if data.get("blur_psnr_db") is not None:
+                    parts.append(f"blurred frames {data['blur_psnr_db']:.1f} dB from sharp")
+                md.write(f"- {lv}: " + ", ".join(parts) + "\n")
         md.write("\n")
     md.write("| Method | " + " | ".join(f"{lv} {lbl}" for lv in levels for _, lbl, _ in METRICS) + " |\n")
     md.write("|---|" + "---|" * (3 * len(levels)) + "\n")

@@ -197,3 +197,15 @@ def test_speed_study_end_to_end_on_the_tiny_scene(tmp_path):
                                              progress=False, log=lambda s: None)}
     assert again["main/cubes/e4dgs"]["lpips"] is not None and not again["main/cubes/e4dgs"].get("scored_as")
     assert again["main/cubes/e4dgs"]["psnr"] == pytest.approx(rows["speed/cubes/e4dgs/x3"]["psnr"])
+
+
+def test_blur_table_at_speed_levels_names_each_speed_and_includes_events_only_cells():
+    from benchmark.report import blur_table
+
+    rows = [{**_row("blur", "h", c, 20.0 + k, speed=s, variant=lv), "key": f"blur/h/{c}/{lv}"}
+            for k, c in enumerate(("d3dgs_blur", "e4dgs")) for lv, s in (("mild", 6.0), ("medium", 8.0), ("strong", 20.0))]
+    md = blur_table(rows)
+    assert "- strong: speed x20, blur 60.0 / 100.0 px (median / p90), blurred frames 13.0 dB from sharp" in md
+    assert "- mild: speed x6," in md
+    e4 = next(l for l in md.splitlines() if l.startswith(f"| {LABELS['e4dgs']} |"))
+    assert e4.count("21.00") == 3 and "every method, events-only ones included" in md
