@@ -238,22 +238,19 @@ def jobs(cfg: BenchConfig) -> list[Job]:
                     out.append(Job("blur", b.scene, name, level, c.method, c.config,
                                    {**cfg.overrides(b.scene, name), key: level}))
     sp = cfg.speed
-    for scene in sp.scenes:
-        ref = cfg.cells["d3dgs_sharp"]        # the reference line: the main cell's run, the same at every speed
-        out.append(Job("speed", scene, "d3dgs_sharp", "sharp", ref.method, ref.config,
-                       _at_speed(cfg, scene, "d3dgs_sharp", None)))
-        for name in sp.cells:
+    sweeps = [(scene, sp.cells, "") for scene in sp.scenes]
+    if sp.sensor_dataset:                 # the same sweep on the realistic sensor's dataset
+        sweeps.append((sp.sensor_scene or sp.scenes[0], sp.sensor_cells, sp.sensor_dataset))
+    for scene, cells, dataset in sweeps:
+        if not dataset:                   # the reference line: the main cell's run, the same at every speed
+            ref = cfg.cells["d3dgs_sharp"]
+            out.append(Job("speed", scene, "d3dgs_sharp", "sharp", ref.method, ref.config,
+                           _at_speed(cfg, scene, "d3dgs_sharp", None)))
+        for name in cells:
             c = cfg.cells[name]
             for s in sp.speeds:
                 out.append(Job("speed", scene, name, f"x{s:g}", c.method, c.config, _at_speed(cfg, scene, name, s),
-                               speed=float(s)))
-    if sp.sensor_dataset:
-        scene = sp.sensor_scene or sp.scenes[0]
-        for name in sp.sensor_cells:
-            c = cfg.cells[name]
-            for s in sp.speeds:
-                out.append(Job("speed", scene, name, f"x{s:g}", c.method, c.config, _at_speed(cfg, scene, name, s),
-                               speed=float(s), dataset=sp.sensor_dataset))
+                               speed=float(s), dataset=dataset))
     a = cfg.ablation
     if a.scene:
         c = cfg.cells[a.base]
