@@ -18,10 +18,14 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmark.config import MAIN_CELLS, BenchConfig, CellSpec
+from benchmark.config import BenchConfig, CellSpec
 from benchmark.runner import run_bench
 from common.config import build_config
 from common.taskpool import RayOptions
+
+
+# the bundled methods' six cells, as in the quick preset
+CELLS = ("d3dgs_sharp", "d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
 
 
 def tiny_grid(iterations: int, scene: str = "cubes") -> BenchConfig:
@@ -31,7 +35,7 @@ def tiny_grid(iterations: int, scene: str = "cubes") -> BenchConfig:
     extra = {"d3dgs_sharp": {"frames": "sharp"}, "d3dgs_blur": {"frames": "strong"},
              "deblur_d3dgs": {"frames": "strong"}, "e4dgs_rgb": {"rgb_frames": "strong"}}
     method = {"d3dgs_sharp": "d3dgs", "d3dgs_blur": "d3dgs"}
-    cells = {c: CellSpec(method.get(c, c), overrides={**train, **extra.get(c, {})}) for c in MAIN_CELLS}
+    cells = {c: CellSpec(method.get(c, c), overrides={**train, **extra.get(c, {})}) for c in CELLS}
     return build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [scene], "cells": cells, "lpips_net": "alex"})
 
 
@@ -62,7 +66,7 @@ def _compare(cfg: BenchConfig, args, tmp: Path) -> int:
             psnr[mode] = {r["key"]: r["psnr"] for r in rows}
             print(f"  repeat {rep + 1} {mode}: {times[mode][-1]:.1f} s", flush=True)
     med = {m: statistics.median(v) for m, v in times.items()}
-    print(f"\nTiny grid: {len(MAIN_CELLS)} jobs x {args.iterations} iterations on tiny_motion/cubes; "
+    print(f"\nTiny grid: {len(CELLS)} jobs x {args.iterations} iterations on tiny_motion/cubes; "
           f"local Ray with {args.cpus} CPUs, 1 per job; medians of {args.repeats}")
     print("| mode | wall (s), median | runs (s) |\n|---|---|---|")
     for m in ("serial", "ray"):

@@ -1,7 +1,8 @@
 """Benchmark presets: which scenes, which method cells, and the extra studies (blur, ablation).
 
-A cell is a method with a config file and dotted overrides; the same method appears in several
-cells (D3DGS on sharp and on blurred frames; E-4DGS with a component switched off). Presets are
+A cell is a method (bundled, or a plug-in of the entry-point group `e4dgs.methods`) with a config
+file, dotted overrides and a label; the same method appears in several cells (D3DGS on sharp and on
+blurred frames). The preset's cells, in their YAML order, are the leaderboard's rows. Presets are
 YAML files in configs/bench/ (`--preset quick` -> configs/bench/quick.yaml) loaded strictly.
 """
 from __future__ import annotations
@@ -17,16 +18,12 @@ from common.config import ConfigError, build_config, to_dict
 REPO = Path(__file__).resolve().parent.parent
 PRESET_DIR = REPO / "configs" / "bench"
 
-# the leaderboard's rows, in the paper's Table 1 order
-MAIN_CELLS = ("d3dgs_sharp", "d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
-LABELS = {"d3dgs_sharp": "D3DGS (sharp RGB)", "d3dgs_blur": "D3DGS (blurred RGB)",
-          "deblur_d3dgs": "Deblur-D3DGS (Deblur4DGS blur model, blurred RGB)", "e2vid_d3dgs": "E2VID + D3DGS",
-          "e4dgs": "E-4DGS (events)", "e4dgs_rgb": "E-4DGS (events + blurred RGB)"}
-
 
 @dataclass(frozen=True)
 class CellSpec:
+    """One row of the leaderboard: a registered method (bundled or a plug-in), its config and label."""
     method: str
+    label: str = ""                                    # the tables' name for it ("": the cell's name)
     config: str = ""                                   # recon config YAML, relative to the repository root
     overrides: dict[str, Any] = field(default_factory=dict)   # dotted keys, as `--set`
     speed: str = ""     # a speed level of the preset (speed_levels): train on that speed variant; "": the scene
@@ -56,6 +53,8 @@ class SpeedStudy:
     sensor_scene: str = ""                # the scene run on it ("": the first of `scenes`)
     sensor_cells: tuple[str, ...] = ("e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
     lpips: bool = False                   # its tables read PSNR: its own runs skip LPIPS unless asked
+    reference: str = "d3dgs_sharp"        # the cell drawn as the reference line (trained at speed 1)
+    rgb_reference: str = "d3dgs_blur"     # the RGB cell the event cells must overtake (crossing speeds)
 
     def __post_init__(self):
         if self.sensor_scene and self.sensor_scene not in self.scenes:
@@ -100,15 +99,20 @@ class BenchConfig:
     description: str = ""
 
     def __post_init__(self):
-        unknown = [c for c in MAIN_CELLS if c not in self.cells]
-        if unknown:
-            raise ConfigError(f"cells: missing {', '.join(unknown)} (every preset defines the six main cells)")
-        for c in self.blur.cells:
+        if not self.cells:
+            raise ConfigError("cells: expected at least one cell ({name: {method: ..., config: ..., label: ...}})")
+        for c in self.blur.cells if self.blur.scene else ():      # a study's cells matter when it runs
             if c not in self.cells:
                 raise ConfigError(f"blur.cells: {c!r} is not a cell")
-        for c in self.speed.cells + self.speed.sensor_cells:
+        sp = self.speed
+        for c in (sp.cells + (sp.sensor_cells if sp.sensor_dataset else ())) if sp.scenes else ():
             if c not in self.cells:
                 raise ConfigError(f"speed.cells: {c!r} is not a cell")
+        if self.speed.scenes:
+            for key in ("reference", "rgb_reference"):
+                c = getattr(self.speed, key)
+                if c not in self.cells:
+                    raise ConfigError(f"speed.{key}: {c!r} is not a cell ({', '.join(self.cells)})")
         for level, factor in self.speed_levels.items():
             if not factor >= 1:
                 raise ConfigError(f"speed_levels.{level}: expected a speed factor >= 1, got {factor!r}")
@@ -132,6 +136,13 @@ class BenchConfig:
     def overrides(self, scene: str, cell: str) -> dict[str, Any]:
         """A cell's overrides on one scene: the cell's own, then the scene's changes to it."""
         return {**self.cells[cell].overrides, **self.scene_overrides.get(scene, {}).get(cell, {})}
+
+    def label(self, cell: str) -> str:
+        return self.cells[cell].label or cell
+
+    def labels(self) -> dict[str, str]:
+        """cell -> label, in the preset's order (the leaderboard's rows)."""
+        return {c: self.label(c) for c in self.cells}
 
     def cell_speed(self, cell: str) -> float | None:
         """The speed factor a cell trains at (None: the scene itself)."""
@@ -162,6 +173,8 @@ class Job:
     seed: int | None = None   # ablation runs: the training seed (part of the key)
     speed: float | None = None    # train on the scene's speed variant <scene>_x<speed> (None: the scene)
     dataset: str = ""             # another dataset preset's folder (the realistic-sensor variants); "": the preset's
+    label: str = ""               # the cell's label in the tables
+    inputs: tuple[str, ...] = ()  # what its method sees (Method.inputs): the tables read it from the row
 
     @property
     def data_scene(self) -> str:
@@ -187,7 +200,8 @@ class Job:
         return {"key": self.key, "study": self.study, "scene": self.scene, "cell": self.cell, "variant": self.variant,
                 "seed": self.seed, "method": self.method, "config": self.config, "overrides": self.overrides,
                 "speed": self.speed, "data_scene": self.data_scene, "dataset": self.dataset,
-                "config_hash": self.config_hash(), "run_dir": self.folder}
+                "config_hash": self.config_hash(), "run_dir": self.folder, "label": self.label or self.cell,
+                "inputs": list(self.inputs)}
 
     def config_hash(self) -> str:
         payload = {"method": self.method, "overrides": self.overrides,
@@ -214,12 +228,32 @@ def _at_speed(cfg: BenchConfig, scene: str, cell: str, speed: float | None) -> d
     return {**cfg.overrides(scene, cell), **extra}
 
 
+def _described(cfg: BenchConfig, job: Job) -> Job:
+    """The job with its cell's label and its method's inputs (what the tables read from its row)."""
+    from dataclasses import replace
+
+    from recon.methods import get_method
+
+    return replace(job, label=cfg.label(job.cell), inputs=tuple(get_method(job.method).inputs))
+
+
 def jobs(cfg: BenchConfig) -> list[Job]:
-    """Every training run of a preset, main table first; studies reuse main runs where they coincide."""
+    """Every training run of a preset, main table first; studies reuse main runs where they coincide.
+    ConfigError names a cell whose method is not registered (bundled or plug-in)."""
+    from recon.methods import get_method
+
+    for name, c in cfg.cells.items():
+        try:
+            get_method(c.method)
+        except ValueError as exc:
+            raise ConfigError(f"cells.{name}.method: {exc}") from None
+    return [_described(cfg, j) for j in _jobs(cfg)]
+
+
+def _jobs(cfg: BenchConfig) -> list[Job]:
     out: list[Job] = []
     for scene in cfg.scenes:
-        for name in MAIN_CELLS:
-            c = cfg.cells[name]
+        for name, c in cfg.cells.items():
             out.append(Job("main", scene, name, "", c.method, c.config, _at_speed(cfg, scene, name, cfg.cell_speed(name)),
                            speed=cfg.cell_speed(name)))
     b = cfg.blur
@@ -243,9 +277,9 @@ def jobs(cfg: BenchConfig) -> list[Job]:
         sweeps.append((sp.sensor_scene or sp.scenes[0], sp.sensor_cells, sp.sensor_dataset))
     for scene, cells, dataset in sweeps:
         if not dataset:                   # the reference line: the main cell's run, the same at every speed
-            ref = cfg.cells["d3dgs_sharp"]
-            out.append(Job("speed", scene, "d3dgs_sharp", "sharp", ref.method, ref.config,
-                           _at_speed(cfg, scene, "d3dgs_sharp", None)))
+            ref = cfg.cells[sp.reference]
+            out.append(Job("speed", scene, sp.reference, "sharp", ref.method, ref.config,
+                           _at_speed(cfg, scene, sp.reference, None)))
         for name in cells:
             c = cfg.cells[name]
             for s in sp.speeds:

@@ -15,8 +15,8 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from benchmark.config import LABELS, MAIN_CELLS
-from benchmark.speed_report import plot_speed, speed_tables
+from benchmark.rows import cell_order, describe_rows, labels_of, sees_rgb
+from benchmark.speed_report import SpeedRoles, plot_speed, speed_tables
 from common.fileio import atomic_output, write_text_atomic
 
 METRICS = (("psnr", "PSNR↑", True), ("ssim", "SSIM↑", True), ("lpips", "LPIPS↓", False))
@@ -71,13 +71,15 @@ def failed_section(failed: list[dict]) -> str:
             "logs are in logs/.\n\n| Job | Last error |\n|---|---|\n" + "\n".join(lines) + "\n")
 
 
-def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> tuple[str, str]:
+def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), order: tuple[str, ...] = ()) -> tuple[str, str]:
     scenes, table = main_table(rows)
     for r in failed:                      # a failed main job still gets its row and column
         if r["study"] == "main" and r["scene"] not in scenes:
             scenes.append(r["scene"])
     failed_cells = {(r["cell"], r["scene"]) for r in failed if r["study"] == "main"}
-    cells = [c for c in MAIN_CELLS if c in table or any(fc == c for fc, _ in failed_cells)]
+    main_rows = [r for r in list(rows) + list(failed) if r["study"] == "main"]
+    cells = cell_order(main_rows, order)
+    labels = labels_of(main_rows)
     columns = [(s, k) for s in scenes for k, _, _ in METRICS] + [("average", k) for k, _, _ in METRICS]
     values = {col: {c: (_average(table, c, scenes, col[1]) if col[0] == "average"
                         else table[c].get(col[0], {}).get(col[1])) for c in cells} for col in columns}
@@ -92,27 +94,31 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> 
     w = csv.writer(out_csv)
     w.writerow(["method", "label"] + [f"{s}_{k}" for s, k in columns] + ["train_s_per_scene", "gaussians_mean"])
     for c in cells:
-        times = [table[c][s]["wall_s"] for s in scenes if s in table[c]]
-        gauss = [table[c][s]["n_gaussians"] for s in scenes if s in table[c]]
-        t = sum(times) / len(times) if times else None
-        g = sum(gauss) / len(gauss) if gauss else None
-        tail = f" | {t:.0f} | {g:.0f} |\n" if t is not None else " | – | – |\n"
-        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(
+        times = [table[c][s].get("wall_s") for s in scenes if s in table[c]]
+        gauss = [table[c][s].get("n_gaussians") for s in scenes if s in table[c]]
+        t = sum(times) / len(times) if times and None not in times else None
+        g = sum(gauss) / len(gauss) if gauss and None not in gauss else None
+        tail = f" | {_fmt_s(t)} | {_fmt_s(g)} |\n"
+        md.write(f"| {labels.get(c, c)} | " + " | ".join(
             "failed" if (c, s) in failed_cells else _mark(_fmt(k, values[(s, k)][c]), ranks[(s, k)].get(c, ""))
             for s, k in columns) + tail)
-        w.writerow([c, LABELS.get(c, c)] + [("" if values[col][c] is None else f"{values[col][c]:.4f}") for col in columns]
+        w.writerow([c, labels.get(c, c)] + [("" if values[col][c] is None else f"{values[col][c]:.4f}") for col in columns]
                    + ["" if t is None else f"{t:.1f}", "" if g is None else f"{g:.0f}"])
+    external = [labels[c] for c in cells if any(r.get("external") for r in table[c].values())]
+    if external:
+        md.write("\nScored from outside renders (`e4dgs score`, their own training): " + ", ".join(external)
+                 + "; their train time is what their authors reported.\n")
     md.write("\nBest per column in **bold**, second <u>underlined</u>. PSNR/SSIM/LPIPS are means of per-image "
-             "values over each scene's held-out views; events-only methods (E-4DGS, E2VID + D3DGS) are scored "
-             "against grayscale ground truth after their log-intensity gain (>= 0) / offset correction, RGB methods "
-             "against RGB. Train time: training-only wall-clock seconds, mean over scenes.\n")
-    speeds = sorted({(LABELS.get(c, c), table[c][s]["speed"]) for c in cells for s in scenes
+             "values over each scene's held-out views; methods that see no RGB (events only) are scored "
+             "against grayscale ground truth after the log-intensity gain (>= 0) / offset correction, methods that "
+             "see RGB against RGB. Train time: training-only wall-clock seconds, mean over scenes.\n")
+    speeds = sorted({(labels.get(c, c), table[c][s]["speed"]) for c in cells for s in scenes
                      if table[c].get(s, {}).get("speed") is not None})
     if speeds:
         md.write("Speed variants: " + "; ".join(f"{label} at x{sp:g}" for label, sp in speeds) + " (the same motion "
                  "x times faster; its blurred frames and its events). The others train on the scene at speed 1.\n")
-    md.write(luma_table(scenes, table, cells))
-    md.write(floor_table(scenes, table, cells))
+    md.write(luma_table(scenes, table, cells, labels))
+    md.write(floor_table(scenes, table, cells, labels))
     if len(scenes) > 1:
         md.write("\n### Per scene\n\n| Scene | Method | PSNR↑ | SSIM↑ | LPIPS↓ | Iterations | Train (s) | Gaussians |\n"
                  "|---|---|---|---|---|---|---|---|\n")
@@ -120,13 +126,18 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = ()) -> 
             for c in cells:
                 r = table[c].get(s)
                 if r:
-                    md.write(f"| {s} | {LABELS.get(c, c)} | {_fmt('psnr', r['psnr'])} | {_fmt('ssim', r['ssim'])} | "
-                             f"{_fmt('lpips', r['lpips'])} | {r['iterations']} | {r['wall_s']:.0f} | {r['n_gaussians']} |\n")
+                    md.write(f"| {s} | {labels.get(c, c)} | {_fmt('psnr', r['psnr'])} | {_fmt('ssim', r['ssim'])} | "
+                             f"{_fmt('lpips', r.get('lpips'))} | {r.get('iterations') or '–'} | {_fmt_s(r.get('wall_s'))} | "
+                             f"{r.get('n_gaussians') or '–'} |\n")
     md.write(failed_section(list(failed)))
     return md.getvalue(), out_csv.getvalue()
 
 
-def floor_table(scenes: list[str], table, cells: list[str]) -> str:
+def _fmt_s(v: float | None) -> str:
+    return "–" if v is None else f"{v:.0f}"
+
+
+def floor_table(scenes: list[str], table, cells: list[str], labels: dict[str, str]) -> str:
     """Every score next to its method's untrained floor: PSNR and floor (paper protocol, then luma)
     per scene. A score says something about what a method learned only as far as it is above it."""
     if not any(table[c].get(s, {}).get("floor_psnr") is not None for c in cells for s in scenes):
@@ -141,13 +152,13 @@ def floor_table(scenes: list[str], table, cells: list[str]) -> str:
                 r = table[c].get(s) or {}
                 vals.append(f"{_fmt('psnr', r.get(key))} ({_fmt('psnr', r.get(floor))})" if r.get(floor) is not None
                             else _fmt("psnr", r.get(key)))
-        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(vals) + " |\n")
+        md.write(f"| {labels.get(c, c)} | " + " | ".join(vals) + " |\n")
     md.write("\nFloor: the method's own starting model (its initial points, nothing trained) scored the same way, after "
              "the same correction. For events-only methods the gain / offset fit alone lifts a flat image to it.\n")
     return md.getvalue()
 
 
-def luma_table(scenes: list[str], table, cells: list[str]) -> str:
+def luma_table(scenes: list[str], table, cells: list[str], labels: dict[str, str]) -> str:
     """PSNR of every method on one target, the luma the events-only methods are scored on (a colour
     prediction's luma against the truth's, after the method's own correction): the main table
     scores colour methods on RGB, a harder target, so its columns mix two quantities."""
@@ -158,7 +169,7 @@ def luma_table(scenes: list[str], table, cells: list[str]) -> str:
     md.write("\n### The same target for every method: PSNR of the luma\n\n| Method | "
              + " | ".join(scenes + ["Average"]) + " |\n|---|" + "---|" * (len(scenes) + 1) + "\n")
     for c in cells:
-        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(_mark(_fmt("psnr", values[col][c]), ranks[col].get(c, ""))
+        md.write(f"| {labels.get(c, c)} | " + " | ".join(_mark(_fmt("psnr", values[col][c]), ranks[col].get(c, ""))
                                                       for col in scenes + ["average"]) + " |\n")
     md.write("\nEvery prediction (after its method's correction) and its ground truth reduced to Rec.709 luma, "
              "sRGB-encoded, as the dataset's gray frames are: the quantity events-only methods are scored on "
@@ -167,29 +178,31 @@ def luma_table(scenes: list[str], table, cells: list[str]) -> str:
 
 
 def accuracy_vs_time(rows: list[dict]) -> str:
+    labels = labels_of(rows)
     md = io.StringIO()
     md.write("| Scene | Method | " + "Snapshots: iteration @ training s → PSNR |\n|---|---|---|\n")
     for r in rows:
         if r["study"] != "main":
             continue
-        pts = ", ".join(f"{p['iteration']} @ {p['wall_s']:.0f} s → {p['psnr']:.2f}" for p in r["snapshots"])
-        md.write(f"| {r['scene']} | {LABELS.get(r['cell'], r['cell'])} | {pts} |\n")
+        pts = ", ".join(f"{p.get('iteration', '–')} @ {p['wall_s']:.0f} s → {p['psnr']:.2f}" for p in r.get("snapshots") or [])
+        md.write(f"| {r['scene']} | {labels.get(r['cell'], r['cell'])} | {pts} |\n")
     return md.getvalue()
 
 
-def plot_accuracy_vs_time(rows: list[dict], path: Path) -> None:
+def plot_accuracy_vs_time(rows: list[dict], path: Path, order: tuple[str, ...] = ()) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     scenes, table = main_table(rows)
+    labels = labels_of(rows)
     fig, axes = plt.subplots(1, max(len(scenes), 1), figsize=(4.2 * max(len(scenes), 1), 3.4), squeeze=False)
     for ax, s in zip(axes[0], scenes):
-        for c in MAIN_CELLS:
+        for c in cell_order([r for r in rows if r["study"] == "main"], order):
             r = table.get(c, {}).get(s)
-            if r and r["snapshots"]:
+            if r and r.get("snapshots"):
                 ax.plot([p["wall_s"] for p in r["snapshots"]], [p["psnr"] for p in r["snapshots"]], "o-",
-                        label=LABELS.get(c, c))
+                        label=labels.get(c, c))
         ax.set_title(s)
         ax.set_xlabel("training wall-clock (s)")
         ax.set_ylabel("test PSNR (dB)")
@@ -201,15 +214,17 @@ def plot_accuracy_vs_time(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def blur_table(rows: list[dict], levels=("mild", "medium", "strong")) -> str:
+def blur_table(rows: list[dict], levels=("mild", "medium", "strong"), order: tuple[str, ...] = (),
+               reference: str = "d3dgs_sharp") -> str:
     blur = [r for r in rows if r["study"] == "blur"]
     if not blur:
         return ""
+    labels = labels_of(rows)
     scene = blur[0]["scene"]
     by = {(r["cell"], r["variant"]): r for r in blur}
     main = {r["cell"]: r for r in rows if r["study"] == "main" and r["scene"] == scene}
     as_speed = any(r.get("speed") is not None for r in blur)      # levels are motion speeds
-    cells = [c for c in MAIN_CELLS if c != "d3dgs_sharp" and (any(k[0] == c for k in by) or c in main)]
+    cells = [c for c in cell_order(blur + list(main.values()), order) if c != reference]
     md = io.StringIO()
     md.write(f"Blur robustness on **{scene}**.\n\n")
     if as_speed:
@@ -232,14 +247,16 @@ def blur_table(rows: list[dict], levels=("mild", "medium", "strong")) -> str:
     for c in cells:
         vals = []
         for lv in levels:
-            r = by.get((c, lv)) or (main.get(c) if c in ("e4dgs", "e2vid_d3dgs") and not as_speed else None)
+            r = by.get((c, lv)) or (main.get(c) if c in main and not sees_rgb(main[c]) and not as_speed else None)
             vals += [_fmt(k, r[k] if r else None) for k, _, _ in METRICS]
-        md.write(f"| {LABELS.get(c, c)} | " + " | ".join(vals) + " |\n")
+        md.write(f"| {labels.get(c, c)} | " + " | ".join(vals) + " |\n")
     if as_speed:
         md.write("\nEach level is a motion speed: every method, events-only ones included, trains on that speed variant "
                  "(its blurred frames and its events).\n")
     else:
-        md.write("\nE-4DGS (events) and E2VID + D3DGS never see the RGB frames, so one run stands for every level.\n")
+        no_rgb = [labels[c] for c in cells if c in main and not sees_rgb(main[c])]
+        if no_rgb:
+            md.write(f"\n{' and '.join(no_rgb)} never see the RGB frames, so one run stands for every level.\n")
     return md.getvalue()
 
 
@@ -261,7 +278,7 @@ def ablation_table(rows: list[dict]) -> str:
     seeds = sorted({r.get("seed") for r in abl if r.get("seed") is not None})
     full = variants.get("full")
     md = io.StringIO()
-    md.write(f"Ablation of {LABELS.get(abl[0]['cell'])} on **{scene}**, {len(seeds) or 1} training seed(s) per "
+    md.write(f"Ablation of {abl[0].get('label') or abl[0]['cell']} on **{scene}**, {len(seeds) or 1} training seed(s) per "
              "variant: mean ± sample standard deviation over the seeds; Δ PSNR against the full method.\n\n"
              "| Variant | Seeds | PSNR↑ | Δ PSNR | SSIM↑ | LPIPS↓ | Gaussians | Train (s) |\n|---|---|---|---|---|---|---|---|\n")
     full_psnr = _mean_spread([r["psnr"] for r in full])[0] if full else None
@@ -280,35 +297,43 @@ def ablation_table(rows: list[dict]) -> str:
     return md.getvalue()
 
 
-def leaderboard_json(rows: list[dict]) -> str:
-    """{cell: {label, scenes: {scene: {psnr, ssim, lpips, wall_s, iterations}}, average: {...}}}."""
+def leaderboard_json(rows: list[dict], order: tuple[str, ...] = ()) -> str:
+    """{cell: {label, inputs, external, scenes: {scene: {psnr, ssim, lpips, wall_s, iterations}}, average: {...}}}."""
     import json
 
     scenes, table = main_table(rows)
     out = {}
-    for c in [c for c in MAIN_CELLS if c in table]:
-        per = {s: {**{k: table[c][s][k] for k in ("psnr", "ssim", "lpips", "wall_s", "iterations", "n_gaussians")},
-                   "psnr_luma": table[c][s].get("psnr_luma")} for s in scenes if s in table[c]}
-        out[c] = {"label": LABELS.get(c, c), "scenes": per,
+    for c in cell_order([r for r in rows if r["study"] == "main"], order):
+        per = {s: {k: table[c][s].get(k) for k in ("psnr", "ssim", "lpips", "wall_s", "iterations", "n_gaussians",
+                                                      "psnr_luma")} for s in scenes if s in table[c]}
+        first = next(iter(table[c].values()))
+        out[c] = {"label": first.get("label") or c, "inputs": first.get("inputs") or [],
+                  "external": bool(first.get("external")), "scenes": per,
                   "average": {k: _average(table, c, scenes, k) for k in ("psnr", "ssim", "lpips", "wall_s")}}
     return json.dumps(out, indent=1)
 
 
-def write_report(rows: list[dict], out_root: Path, header: str = "") -> list[Path]:
+def write_report(rows: list[dict], out_root: Path, header: str = "", cfg=None) -> list[Path]:
+    """Every table and plot of results rows; `cfg` (the preset, a benchmark.config.BenchConfig) gives
+    the cells' order and labels and the speed study's reference cells (without it: the rows' own)."""
     if not rows:
         raise ValueError(f"{out_root}: no results to report")
+    order = tuple(cfg.cells) if cfg is not None else ()
+    rows = describe_rows(rows, cfg.labels() if cfg is not None else None)
+    roles = SpeedRoles(cfg.speed.reference, cfg.speed.rgb_reference) if cfg is not None else SpeedRoles()
     failed = [r for r in rows if is_failed(r)]
     rows = [r for r in rows if not is_failed(r)]
-    md, table_csv = leaderboard(rows, header, failed)
+    md, table_csv = leaderboard(rows, header, failed, order)
     written = []
-    for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv), ("leaderboard.json", leaderboard_json(rows)),
-                       ("accuracy_vs_time.md", accuracy_vs_time(rows)), ("blur.md", blur_table(rows)),
-                       ("ablation.md", ablation_table(rows)), ("speed.md", speed_tables(rows + failed))):
+    for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv),
+                       ("leaderboard.json", leaderboard_json(rows, order)), ("accuracy_vs_time.md", accuracy_vs_time(rows)),
+                       ("blur.md", blur_table(rows, order=order, reference=roles.reference)),
+                       ("ablation.md", ablation_table(rows)), ("speed.md", speed_tables(rows + failed, roles, order))):
         if text:
             write_text_atomic(out_root / name, text)
             written.append(out_root / name)
-    plot_accuracy_vs_time(rows, out_root / "accuracy_vs_time.png")
+    plot_accuracy_vs_time(rows, out_root / "accuracy_vs_time.png", order)
     written.append(out_root / "accuracy_vs_time.png")
-    if plot_speed(rows, out_root / "speed.png"):
+    if plot_speed(rows, out_root / "speed.png", roles, order):
         written.append(out_root / "speed.png")
     return written

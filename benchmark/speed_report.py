@@ -14,11 +14,19 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from benchmark.config import LABELS
+from dataclasses import dataclass
+
+from benchmark.rows import describe_rows, labels_of, sees_events
 from common.fileio import atomic_output
 
-RGB_REFERENCE = "d3dgs_blur"                 # the method events must beat
-EVENT_CELLS = ("e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+
+@dataclass(frozen=True)
+class SpeedRoles:
+    """The study's two reference cells (the preset's speed.reference / speed.rgb_reference)."""
+    reference: str = "d3dgs_sharp"      # the line: trained on sharp frames, the same at every speed
+    rgb_reference: str = "d3dgs_blur"   # the RGB method the event methods must overtake
+
+
 FLOOR_MARGIN_DB = 1.0                         # above the floor by less than this: "rests on the floor"
 PROTOCOLS = (("psnr", "floor_psnr", "paper protocol (colour for RGB inputs, gray after gain/offset for events only)"),
              ("psnr_luma", "floor_psnr_luma", "luma (every method on the gray target)"))
@@ -58,11 +66,19 @@ def crossing_speed(speeds: list[float], ahead_db: list[float | None]) -> tuple[f
     return math.exp(math.log(s0) + f * (math.log(s1) - math.log(s0))), "crosses"
 
 
-def _sharp_reference(rows: list[dict]) -> dict[str, dict]:
-    """scene -> the row of D3DGS on sharp frames (the speed study's reference, else the main cell's)."""
-    out = {r["scene"]: r for r in rows if r.get("study") == "main" and r.get("cell") == "d3dgs_sharp"}
-    out.update({r["scene"]: r for r in rows if r.get("study") == "speed" and r.get("cell") == "d3dgs_sharp"})
+def _sharp_reference(rows: list[dict], reference: str) -> dict[str, dict]:
+    """scene -> the row of the reference cell (the speed study's, else the main study's)."""
+    out = {r["scene"]: r for r in rows if r.get("study") == "main" and r.get("cell") == reference}
+    out.update({r["scene"]: r for r in rows if r.get("study") == "speed" and r.get("cell") == reference})
     return out
+
+
+def _ordered(cells, order: tuple[str, ...]) -> list[str]:
+    return [c for c in order if c in cells] + [c for c in cells if c not in order]
+
+
+def _sees_events(cell_rows: dict[float, dict]) -> bool:
+    return any(sees_events(r) for r in cell_rows.values())
 
 
 def _fmt(v: float | None, floor: float | None = None) -> str:
@@ -86,22 +102,25 @@ def _speed_header(speeds: list[float], cells: dict[str, dict[float, dict]]) -> l
     return out
 
 
-def speed_tables(rows: list[dict]) -> str:
+def speed_tables(rows: list[dict], roles: SpeedRoles = SpeedRoles(), order: tuple[str, ...] = ()) -> str:
     """speed.md: per scene (and sensor), PSNR in both protocols at every speed, each with its floor,
     the sharp reference and the crossing speeds."""
+    rows = describe_rows(rows)
     grid = speed_grid(rows)
     if not grid:
         return ""
-    sharp = _sharp_reference(rows)
+    sharp = _sharp_reference(rows, roles.reference)
+    labels = labels_of(rows)
+    rgb_ref = roles.rgb_reference
     md = io.StringIO()
     md.write("# Speed study\n\nEvery cell trained on each speed variant of the scene (the same render traversed x times "
              "faster; a fixed shutter, so the blur grows with the speed; events simulated again at every speed with the "
              "scene's sensor). Each score is followed by its method's untrained floor in brackets (the starting model "
              "scored after the same correction). Reference: D3DGS on the sharp frames, the same at every speed.\n")
     for (dataset, scene), cells in sorted(grid.items()):
-        if dataset and RGB_REFERENCE not in cells and RGB_REFERENCE in grid.get(("", scene), {}):
+        if dataset and rgb_ref not in cells and rgb_ref in grid.get(("", scene), {}):
             # another sensor sees the same frames: the RGB methods' runs of the scene are its reference
-            cells = {RGB_REFERENCE: grid[("", scene)][RGB_REFERENCE], **cells}
+            cells = {rgb_ref: grid[("", scene)][rgb_ref], **cells}
         speeds = sorted({s for c in cells.values() for s in c})
         title = f"{scene}" + (f", sensor of dataset `{dataset}`" if dataset else "")
         md.write(f"\n## {title}\n\nPer speed: blur median / p90, blurred vs sharp PSNR, events per second per camera: "
@@ -111,35 +130,41 @@ def speed_tables(rows: list[dict]) -> str:
                      + " |\n|---|" + "---|" * len(speeds) + "\n")
             ref = sharp.get(scene)
             if ref is not None:
-                md.write(f"| {LABELS['d3dgs_sharp']} (reference) | " + " | ".join(_fmt(ref.get(key)) for _ in speeds) + " |\n")
-            for cell in [c for c in LABELS if c in cells]:
+                md.write(f"| {labels.get(roles.reference, roles.reference)} (reference) | "
+                         + " | ".join(_fmt(ref.get(key)) for _ in speeds) + " |\n")
+            for cell in [c for c in _ordered(cells, order) if c != roles.reference]:
                 vals = [("failed" if cells[cell][s].get("status") == "failed" else
                          _fmt(cells[cell][s].get(key), cells[cell][s].get(floor_key))) if s in cells[cell] else "–"
                         for s in speeds]
-                md.write(f"| {LABELS[cell]} | " + " | ".join(vals) + " |\n")
-            md.write("\n" + crossing_lines(_ok(cells), speeds, key, floor_key) + "\n")
+                md.write(f"| {labels[cell]} | " + " | ".join(vals) + " |\n")
+            md.write("\n" + crossing_lines(_ok(cells), speeds, key, floor_key, rgb_ref, labels, order) + "\n")
         failed = [(c, s, r) for c, v in cells.items() for s, r in sorted(v.items()) if r.get("status") == "failed"]
         for c, s, r in failed:
-            md.write(f"- failed: {LABELS.get(c, c)} at x{s:g}: {' '.join(str(r.get('error', '')).split())}\n")
+            md.write(f"- failed: {labels.get(c, c)} at x{s:g}: {' '.join(str(r.get('error', '')).split())}\n")
     md.write(f"\nA crossing rests on the floor when the event method is less than {FLOOR_MARGIN_DB:g} dB above its "
              "untrained floor at the first speed it is ahead: the RGB method fell to it, the events taught little.\n")
     return md.getvalue()
 
 
-def crossing_lines(cells: dict[str, dict[float, dict]], speeds: list[float], key: str, floor_key: str) -> str:
-    """One line per event method: where it overtakes D3DGS on blurred frames in this protocol."""
-    rgb = cells.get(RGB_REFERENCE, {})
+def crossing_lines(cells: dict[str, dict[float, dict]], speeds: list[float], key: str, floor_key: str,
+                   rgb_ref: str = "d3dgs_blur", labels: dict[str, str] | None = None,
+                   order: tuple[str, ...] = ()) -> str:
+    """One line per cell that sees events: where it overtakes the RGB reference (D3DGS on blurred
+    frames) in this protocol."""
+    labels = {**{c: c for c in cells}, **(labels or {})}
+    labels.setdefault(rgb_ref, rgb_ref)
+    rgb = cells.get(rgb_ref, {})
     lines = []
-    for cell in [c for c in EVENT_CELLS if c in cells]:
+    for cell in [c for c in _ordered(cells, order) if _sees_events(cells[c])]:
         ahead = [(cells[cell][s][key] - rgb[s][key]) if s in cells[cell] and s in rgb else None for s in speeds]
         s_x, how = crossing_speed(speeds, ahead)
-        label = LABELS[cell]
+        label = labels[cell]
         if how == "no data":
-            lines.append(f"- {label}: no speed with both it and {LABELS[RGB_REFERENCE]}.")
+            lines.append(f"- {label}: no speed with both it and {labels[rgb_ref]}.")
             continue
         if how == "never ahead":
             s_last, d_last = [(s, d) for s, d in zip(speeds, ahead) if d is not None][-1]
-            lines.append(f"- {label}: does not overtake {LABELS[RGB_REFERENCE]} within the sweep "
+            lines.append(f"- {label}: does not overtake {labels[rgb_ref]} within the sweep "
                          f"(up to x{s_last:g}, where it is {d_last:+.2f} dB).")
             continue
         first = next(s for s, d in zip(speeds, ahead) if d is not None and d > 0 and s >= s_x - 1e-9)
@@ -153,7 +178,7 @@ def crossing_lines(cells: dict[str, dict[float, dict]], speeds: list[float], key
     return "\n".join(lines)
 
 
-def plot_speed(rows: list[dict], path: Path) -> bool:
+def plot_speed(rows: list[dict], path: Path, roles: SpeedRoles = SpeedRoles(), order: tuple[str, ...] = ()) -> bool:
     """speed.png: PSNR (paper protocol) against speed per scene, blur px on a second axis, D3DGS on
     sharp frames as the reference line. False when there is no speed study."""
     grid = {k: _ok(v) for k, v in speed_grid(rows).items() if not k[0]}
@@ -163,21 +188,23 @@ def plot_speed(rows: list[dict], path: Path) -> bool:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    sharp = _sharp_reference(rows)
+    sharp = _sharp_reference(rows, roles.reference)
+    labels = labels_of(rows)
     fig, axes = plt.subplots(1, len(grid), figsize=(5.2 * len(grid), 3.8), squeeze=False)
     for ax, ((_, scene), cells) in zip(axes[0], sorted(grid.items())):
         speeds = sorted({s for c in cells.values() for s in c})
-        for cell in [c for c in LABELS if c in cells]:
+        for cell in [c for c in _ordered(cells, order) if c != roles.reference]:
             pts = sorted(cells[cell].items())
-            ax.plot([s for s, _ in pts], [r["psnr"] for _, r in pts], "o-", label=LABELS[cell], ms=4)
+            ax.plot([s for s, _ in pts], [r["psnr"] for _, r in pts], "o-", label=labels[cell], ms=4)
         if scene in sharp:
-            ax.axhline(sharp[scene]["psnr"], color="k", ls="--", lw=1, label=LABELS["d3dgs_sharp"] + " (reference)")
+            ax.axhline(sharp[scene]["psnr"], color="k", ls="--", lw=1,
+                       label=labels.get(roles.reference, roles.reference) + " (reference)")
         ax.set_xscale("log", base=2)
         ax.set_xlabel("speed factor (same motion, x times faster)")
         ax.set_ylabel("test PSNR (dB), paper protocol")
         ax.set_title(scene)
         ax.grid(alpha=0.3)
-        blur = [(s, (r.get("data") or {}).get("blur_median_px")) for s, r in sorted(cells.get(RGB_REFERENCE, {}).items())]
+        blur = [(s, (r.get("data") or {}).get("blur_median_px")) for s, r in sorted(cells.get(roles.rgb_reference, {}).items())]
         blur = [(s, b) for s, b in blur if b is not None]
         if blur:
             ax2 = ax.twinx()

@@ -20,6 +20,9 @@ class Method:
     name = ""
     config_cls: type = object
     blur_level_field: str | None = None   # the config field that picks the RGB blur level it trains on (None: none)
+    # what it sees: ("rgb",), ("events",) or ("events", "rgb"). Scoring follows it: a method that
+    # sees no RGB has no absolute intensity and is scored after its `correction`; the tables read it
+    inputs: tuple[str, ...] = ()
 
     def __init__(self, dataset: SceneDataset, cfg: Any):
         self.dataset, self.cfg = dataset, cfg

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from benchmark.config import LABELS, MAIN_CELLS, BenchConfig, CellSpec, jobs, load_bench
+from bench_cells import LABELS, MAIN_CELLS, described
+from benchmark.config import BenchConfig, CellSpec, jobs, load_bench
 from common.metrics.image import psnr, score_pairs, ssim
 from benchmark.report import write_report
 from benchmark.runner import read_results, run_bench
@@ -87,12 +88,34 @@ def test_shipped_presets_load_and_cover_every_method():
 
 def test_preset_errors_name_the_key(tmp_path):
     bad = tmp_path / "b.yaml"
-    bad.write_text("scenes: [a]\ncells: {d3dgs_sharp: {method: d3dgs}}\n")
-    with pytest.raises(ConfigError, match="missing"):
+    bad.write_text("scenes: [a]\ncells: {}\n")
+    with pytest.raises(ConfigError, match="at least one cell"):
         load_bench(bad)
+    bad.write_text("scenes: [a]\ncells: {mine: {method: d3dgs}}\nblur: {scene: a, cells: [d3dgs_blur]}\n")
+    with pytest.raises(ConfigError, match="blur.cells: 'd3dgs_blur' is not a cell"):
+        load_bench(bad)
+    bad.write_text("scenes: [a]\ncells: {mine: {method: d3dgs}}\nspeed: {scenes: [a], speeds: [1, 2], cells: [mine]}\n")
+    with pytest.raises(ConfigError, match="speed.reference: 'd3dgs_sharp' is not a cell"):
+        load_bench(bad)
+    bad.write_text("scenes: [a]\ncells: {mine: {method: no_such_method}}\n")
+    with pytest.raises(ConfigError, match="cells.mine.method: unknown method 'no_such_method'"):
+        jobs(load_bench(bad))
     bad.write_text("scenes: [a]\nsceens: [b]\n")
     with pytest.raises(ConfigError, match="sceens"):
         load_bench(bad)
+
+
+def test_cells_order_and_labels_come_from_the_preset(tmp_path):
+    """Any set of cells: the YAML's order is the jobs' (and the leaderboard's) order, labels and
+    inputs travel with the jobs into their rows."""
+    p = tmp_path / "p.yaml"
+    p.write_text("scenes: [a]\ncells:\n  zz_events: {method: e4dgs, label: Mine on events}\n"
+                 "  aa_rgb: {method: d3dgs}\n")
+    cfg = load_bench(p)
+    js = jobs(cfg)
+    assert [j.cell for j in js] == ["zz_events", "aa_rgb"]
+    ident = [j.identity() for j in js]
+    assert [(i["label"], i["inputs"]) for i in ident] == [("Mine on events", ["events"]), ("aa_rgb", ["rgb"])]
 
 
 # ---------------------------------------------------------------- the runner, end to end
@@ -164,10 +187,10 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
 # ---------------------------------------------------------------- reports from stored rows
 
 def _row(study, scene, cell, psnr_db, variant="", ssim_v=0.9, lpips_v=0.1, seed=None):
-    return {"key": "/".join(p for p in (study, scene, cell, variant, "" if seed is None else f"seed{seed}") if p),
+    return described({"key": "/".join(p for p in (study, scene, cell, variant, "" if seed is None else f"seed{seed}") if p),
             "study": study, "scene": scene, "cell": cell, "variant": variant, "seed": seed, "psnr": psnr_db, "ssim": ssim_v, "lpips": lpips_v, "iterations": 10,
             "wall_s": 100.0, "n_gaussians": 1000, "snapshots": [{"iteration": 5, "wall_s": 50.0, "psnr": psnr_db - 1},
-                                                              {"iteration": 10, "wall_s": 100.0, "psnr": psnr_db}]}
+                                                              {"iteration": 10, "wall_s": 100.0, "psnr": psnr_db}]})
 
 
 def test_report_from_stored_results(tmp_path):

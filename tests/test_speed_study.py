@@ -5,18 +5,21 @@ import math
 
 import pytest
 
-from benchmark.config import LABELS, MAIN_CELLS, BenchConfig, CellSpec, jobs
+from bench_cells import LABELS, MAIN_CELLS, described
+from benchmark.config import BenchConfig, CellSpec, jobs
 from benchmark.report import write_report
 from benchmark.speed_report import crossing_speed, speed_tables
 from common.config import ConfigError, build_config
 
 CELLS = {c: CellSpec({"d3dgs_sharp": "d3dgs", "d3dgs_blur": "d3dgs", "deblur_d3dgs": "deblur_d3dgs",
-                      "e2vid_d3dgs": "e2vid_d3dgs", "e4dgs": "e4dgs", "e4dgs_rgb": "e4dgs_rgb"}[c]) for c in MAIN_CELLS}
+                      "e2vid_d3dgs": "e2vid_d3dgs", "e4dgs": "e4dgs", "e4dgs_rgb": "e4dgs_rgb"}[c], label=LABELS[c])
+         for c in MAIN_CELLS}
 
 
 def _cfg(**extra) -> BenchConfig:
-    cells = {**CELLS, "d3dgs_blur": CellSpec("d3dgs", speed="mild"), "e4dgs": CellSpec("e4dgs", speed="mild"),
-             "e4dgs_rgb": CellSpec("e4dgs_rgb", speed="mild")}
+    cells = {**CELLS, "d3dgs_blur": CellSpec("d3dgs", LABELS["d3dgs_blur"], speed="mild"),
+             "e4dgs": CellSpec("e4dgs", LABELS["e4dgs"], speed="mild"),
+             "e4dgs_rgb": CellSpec("e4dgs_rgb", LABELS["e4dgs_rgb"], speed="mild")}
     raw = {"scenes": ["g", "h"], "cells": cells, "speed_levels": {"mild": 6.0, "medium": 8.0, "strong": 20.0},
            "blur": {"scene": "h", "cells": ["d3dgs_blur", "e4dgs"]},
            "speed": {"scenes": ["g"], "speeds": [1, 6, 20], "cells": ["d3dgs_blur", "e4dgs"]}, **extra}
@@ -72,12 +75,12 @@ def test_crossing_speed_is_interpolated_in_log_speed():
 
 
 def _row(study, scene, cell, psnr, speed=None, floor=18.0, variant=""):
-    return {"key": f"{study}/{scene}/{cell}/{variant}", "study": study, "scene": scene, "cell": cell, "variant": variant,
+    return described({"key": f"{study}/{scene}/{cell}/{variant}", "study": study, "scene": scene, "cell": cell, "variant": variant,
             "seed": None, "speed": speed, "dataset": "", "psnr": psnr, "psnr_luma": psnr + 1.0, "ssim": 0.8, "lpips": 0.3,
             "floor_psnr": floor, "floor_psnr_luma": floor + 1.0, "wall_s": 100.0, "iterations": 10, "n_gaussians": 5,
             "snapshots": [], "data": {"speed": speed or 1.0, "events_per_s_per_camera": 5e7 * (speed or 1),
                                       "blur_median_px": 3.0 * (speed or 1), "blur_p90_px": 5.0 * (speed or 1),
-                                      "blur_psnr_db": 33.0 - (speed or 1)}}
+                                      "blur_psnr_db": 33.0 - (speed or 1)}})
 
 
 def test_speed_tables_and_plot_from_rows(tmp_path):

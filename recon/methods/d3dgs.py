@@ -33,6 +33,7 @@ class D3DGS(Method):
     name = "d3dgs"
     config_cls = D3DGSConfig
     blur_level_field = "frames"
+    inputs = ("rgb",)
 
     def __init__(self, dataset: SceneDataset, cfg: D3DGSConfig):
         super().__init__(dataset, cfg)

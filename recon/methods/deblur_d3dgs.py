@@ -37,6 +37,7 @@ class DeblurD3DGS(Method):
     name = "deblur_d3dgs"
     config_cls = DeblurD3DGSConfig
     blur_level_field = "frames"
+    inputs = ("rgb",)
 
     def __init__(self, dataset: SceneDataset, cfg: DeblurD3DGSConfig):
         super().__init__(dataset, cfg)

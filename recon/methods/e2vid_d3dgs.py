@@ -40,6 +40,7 @@ class E2VIDD3DGS(D3DGS):
     name = "e2vid_d3dgs"
     config_cls = E2VIDD3DGSConfig
     blur_level_field = None        # trains on frames reconstructed from events: blur cannot change it
+    inputs = ("events",)
 
     @classmethod
     def channels_of(cls, cfg: E2VIDD3DGSConfig) -> int:

@@ -56,6 +56,7 @@ class E4DGS(Method):
     name = "e4dgs"
     config_cls = E4DGSConfig
     uses_rgb = False
+    inputs = ("events",)
 
     def __init__(self, dataset: SceneDataset, cfg: E4DGSConfig):
         super().__init__(dataset, cfg)
@@ -196,4 +197,5 @@ class E4DGS(Method):
 class E4DGSRGB(E4DGS):
     name = "e4dgs_rgb"
     uses_rgb = True
+    inputs = ("events", "rgb")
     blur_level_field = "rgb_frames"
