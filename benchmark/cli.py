@@ -29,6 +29,70 @@ def add_bench_parser(sub) -> None:
     p.set_defaults(func=run_bench_cli)
 
 
+def report_header(name: str, cfg) -> str:
+    return (f"# Leaderboard: `{name}` preset\n\n{cfg.description.strip()}\n\nMeasured on a 2-core CPU "
+            f"(no GPU) unless the rows' versions say otherwise.")
+
+
+def add_testviews_parser(sub) -> None:
+    p = sub.add_parser("testviews", help="write the held-out views a method must render to be scored",
+                       description="Writes testviews.json for a scene folder, or for every scene (and speed variant) "
+                                   "of a dataset root: per view the camera, time, intrinsics, pose, image size, the "
+                                   "file name its render must have and the ground truth it is scored against.")
+    p.add_argument("data", type=Path, help="a dataset root (data/quick) or one scene folder (data/quick/hinge)")
+    p.add_argument("--out", type=Path, default=None, help="write <out>/<scene>/testviews.json (default: into each scene)")
+    p.set_defaults(func=run_testviews)
+
+
+def run_testviews(args: argparse.Namespace) -> int:
+    from benchmark.testviews import write_test_views
+
+    paths = write_test_views(args.data, args.out)
+    print(f"testviews: wrote {len(paths)} file(s): " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def add_score_parser(sub) -> None:
+    p = sub.add_parser("score", help="score a folder of renders from any method and add it to a leaderboard",
+                       description="Scores <renders>/<scene>/cam<k>/<index>.png|.exr (the views of `e4dgs testviews`) "
+                                   "by the leaderboard's protocol and appends the rows, marked external, to "
+                                   "<out>/results.jsonl; the tables in <out> are written again. Optional "
+                                   "<renders>/<scene>/snapshots/<seconds>/ give accuracy against training time.")
+    p.add_argument("--data", type=Path, required=True, help="the dataset root the renders are of (data/quick)")
+    p.add_argument("--renders", type=Path, required=True, help="folder of <scene>/ render folders")
+    p.add_argument("--name", required=True, help="the method's cell name in the results (not one of the preset's)")
+    p.add_argument("--inputs", required=True, choices=("events", "rgb", "events+rgb"),
+                   help="what the method saw: events-only renders are gray, scored after the log gain / offset")
+    p.add_argument("--label", default="", help="its name in the tables (default: --name)")
+    p.add_argument("--train-seconds", type=float, default=None, help="training wall-clock seconds per scene")
+    p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<dataset folder name>)")
+    p.add_argument("--lpips", default=None, choices=("vgg", "alex", "none"),
+                   help="LPIPS network (default: the preset's, from <out>/bench.json; else vgg)")
+    p.set_defaults(func=run_score)
+
+
+def run_score(args: argparse.Namespace) -> int:
+    import json
+
+    from benchmark.config import load_bench
+    from benchmark.report import write_report
+    from benchmark.score import append_rows, score_renders
+
+    out = args.out or Path("runs") / args.data.resolve().name
+    cfg = name = None
+    if (out / "bench.json").exists():           # the preset the results belong to: its cells, labels, LPIPS
+        name = json.loads((out / "bench.json").read_text()).get("preset")
+        cfg = load_bench(name) if name else None
+    lpips = args.lpips or (cfg.lpips_net if cfg is not None else "vgg")
+    rows = score_renders(args.data, args.renders, args.name, args.inputs, args.train_seconds,
+                         None if lpips == "none" else lpips,
+                         tuple(cfg.snapshot_metrics) if cfg is not None else ("psnr", "ssim"), args.label)
+    all_rows = append_rows(out / "results.jsonl", rows, tuple(cfg.cells) if cfg is not None else ())
+    paths = write_report(all_rows, out, report_header(name, cfg) if cfg is not None else "", cfg)
+    print(f"score: {len(rows)} row(s) added to {out / 'results.jsonl'}; wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
 def run_bench_cli(args: argparse.Namespace) -> int:
     from benchmark.config import load_bench
     from benchmark.report import write_report
@@ -57,8 +121,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
     for c in cells or []:
         if c not in cfg.cells:
             raise SystemExit(f"error: --methods: {c!r} is not a cell of preset {name!r} ({', '.join(cfg.cells)})")
-    header = (f"# Leaderboard: `{name}` preset\n\n{cfg.description.strip()}\n\nMeasured on a 2-core CPU "
-              f"(no GPU) unless the rows' versions say otherwise.")
+    header = report_header(name, cfg)
     if not args.report:
         studies = tuple(split(args.studies) or ())
         unknown = [st for st in studies if st not in ("main", "blur", "ablation", "speed")]

@@ -30,6 +30,11 @@ class FrameRecord:
     gray_path: Path | None = None
     exposure_us: tuple[int, int] | None = None   # first and last rendered frame of a blurred frame
 
+    @property
+    def stem(self) -> str:
+        """cam<k>/<index>: the frame's name in rgb/, gray/, and the name its render must have for `e4dgs score`."""
+        return f"cam{self.camera}/{self.index:05d}"
+
 
 def read_json(path: Path):
     """A dataset's JSON file; a missing or malformed one is a DatasetError naming it."""

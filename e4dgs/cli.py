@@ -16,7 +16,7 @@ from common.config import ConfigWarning
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from benchmark.cli import add_bench_parser
+    from benchmark.cli import add_bench_parser, add_score_parser, add_testviews_parser
     from datagen.cli import add_check_parser, add_dataset_parser
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
@@ -34,6 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_train_e2vid_parser(sub)
     add_e2vid_parser(sub)
     add_bench_parser(sub)
+    add_testviews_parser(sub)
+    add_score_parser(sub)
     return parser
 
 

@@ -47,9 +47,14 @@ def add_render_parser(sub) -> None:
                        description="Render a trained model. --camera is a dataset camera index (posed along its "
                                    "recorded trajectory) or a JSON file {K: 3x3, c2w_opencv: 4x4, width, height}.")
     p.add_argument("--model", type=Path, required=True, help="training folder or model .pt file")
-    p.add_argument("--camera", required=True, help="camera index, or a JSON camera file")
-    p.add_argument("--t", type=float, nargs="+", required=True, help="normalised times in [0, 1]")
-    p.add_argument("--out", type=Path, required=True, help="output folder for PNGs")
+    p.add_argument("--camera", default=None, help="camera index, or a JSON camera file")
+    p.add_argument("--t", type=float, nargs="+", default=None, help="normalised times in [0, 1]")
+    p.add_argument("--test-views", type=Path, default=None, metavar="SCENE",
+                   help="instead of --camera/--t: render every held-out view of this scene folder as "
+                        "<out>/cam<k>/<index>.<format>, the layout `e4dgs score` reads")
+    p.add_argument("--format", choices=("png", "exr"), default="png",
+                   help="with --test-views: 8-bit PNG, or float32 EXR (exact; the same [0, 1] values)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
     p.set_defaults(func=run_render)
 
 
@@ -84,6 +89,27 @@ def camera_from_json(path: Path):
     return camera_from_pose(fields["K"], fields["c2w_opencv"], data["width"], data["height"])
 
 
+def render_test_views(model, scene_dir: Path, out: Path, fmt: str = "png") -> int:
+    """Every held-out view of a scene rendered by `model`, saved as out/cam<k>/<index>.<fmt> (EXR: float32,
+    the same sRGB-encoded values in [0, 1] as the PNG). Returns the number of views."""
+    from common.imageio import write_exr, write_png
+    from datagen.dataset import SceneDataset
+    from recon.views import record_camera
+
+    dataset = SceneDataset(scene_dir)
+    records = dataset.frames("test")
+    for rec in records:
+        img = model.render_numpy(record_camera(dataset, rec), rec.time)
+        path = out / f"{rec.stem}.{fmt}"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        img = img[..., 0] if img.shape[2] == 1 else img
+        if fmt == "exr":
+            write_exr(path, img)
+        else:
+            write_png(path, (img * 255 + 0.5).astype(np.uint8))
+    return len(records)
+
+
 def run_render(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from recon.model import load
@@ -92,6 +118,12 @@ def run_render(args: argparse.Namespace) -> int:
         model = load(args.model)
     except (FileNotFoundError, ValueError) as exc:
         raise SystemExit(f"error: {exc}") from None
+    if args.test_views is not None:
+        n = render_test_views(model, args.test_views, args.out, args.format)
+        print(f"render: {n} test view(s) of {args.test_views} -> {args.out}")
+        return 0
+    if args.camera is None or not args.t:
+        raise SystemExit("error: give --camera and --t, or --test-views SCENE")
     camera = int(args.camera) if args.camera.isdigit() else camera_from_json(Path(args.camera))
     for t in args.t:
         try:
