@@ -1,0 +1,117 @@
+"""Methods as plug-ins: the example package under examples/plugin_method, installed with pip, trains
+and appears in a bench without editing the project; broken plug-ins are refused naming the entry point."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import recon.methods as registry
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "examples" / "plugin_method"
+TINY = {"train.iterations": 10, "train.scale_schedule": False, "train.warm_up": 200, "train.densify.enabled": False,
+        "train.init.n_points_object": 200, "train.snapshots": [1.0]}
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """The example plug-in pip-installed into a folder of its own (offline, no dependencies)."""
+    import shutil
+
+    target = tmp_path_factory.mktemp("site")
+    source = tmp_path_factory.mktemp("src") / "plugin_method"       # a setuptools build writes into its source
+    shutil.copytree(EXAMPLE, source, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
+    r = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+                        "--no-index", "--target", str(target), str(source)], capture_output=True, text=True,
+                       cwd=source.parent)
+    assert r.returncode == 0, r.stderr
+    assert list(target.glob("e4dgs_integrate-*.dist-info/entry_points.txt"))
+    return target
+
+
+def _env(site: Path) -> dict:
+    return {**os.environ, "PYTHONPATH": str(site), "NUMBA_CACHE_DIR": os.environ.get("NUMBA_CACHE_DIR", "")}
+
+
+def test_installed_plugin_trains_and_appears_in_a_bench(installed, motion_scene, tmp_path):
+    preset = tmp_path / "mine.yaml"
+    cells = {"d3dgs_sharp": {"method": "d3dgs", "label": "D3DGS (sharp RGB)", "overrides": {**TINY, "frames": "sharp"}},
+             "mine": {"method": "integrate_d3dgs", "label": "Event integration + D3DGS", "overrides": TINY}}
+    preset.write_text(json.dumps({"dataset": "tiny_motion", "scenes": [motion_scene.name], "cells": cells,
+                                  "lpips_net": "alex"}))            # JSON is YAML
+    out = tmp_path / "runs"
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "bench", "--preset", str(preset), "--data",
+                        str(motion_scene.parent), "--out", str(out), "--studies", "main", "--no-progress"],
+                       capture_output=True, text=True, cwd=ROOT, env=_env(installed))
+    assert r.returncode == 0, r.stderr[-2000:]
+    rows = {json.loads(line)["cell"]: json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()}
+    mine = rows["mine"]
+    assert mine["method"] == "integrate_d3dgs" and mine["inputs"] == ["events"] and mine["channels"] == 1
+    assert np.isfinite(mine["psnr"]) and np.isfinite(mine["floor_psnr"]) and mine["iterations"] == 10
+    board = (out / "leaderboard.md").read_text()
+    lines = [l for l in board.splitlines() if l.startswith("| D3DGS (sharp RGB) |") or l.startswith("| Event integration")]
+    assert [l.split(" |")[0] for l in lines[:2]] == ["| D3DGS (sharp RGB)", "| Event integration + D3DGS"]
+    # without the plug-in installed the same preset is refused, naming the cell
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "bench", "--preset", str(preset), "--data",
+                        str(motion_scene.parent), "--out", str(tmp_path / "o2"), "--studies", "main"],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "cells.mine.method: unknown method 'integrate_d3dgs'" in r.stderr
+
+
+def test_integration_solved_by_hand():
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        from e4dgs_integrate import integrate
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    x, y = np.array([1, 1, 1, 0]), np.array([0, 0, 0, 1])
+    p, t = np.array([1.0, 1.0, -1.0, -1.0]), np.array([10, 20, 30, 40])
+    out = integrate(x, y, p, t, np.array([0, 25, 50]), 2, 2, 0.5, 0.0)
+    assert out[:, 0, 1].tolist() == [0.0, 1.0, 0.5] and out[:, 1, 0].tolist() == [0.0, 0.0, -0.5]
+    leak = integrate(x, y, p, t, np.array([0, 25, 1025]), 2, 2, 0.5, 100.0)
+    assert leak[2, 0, 1] == pytest.approx(1.0 * np.exp(-2 * np.pi * 100.0 * 1e-3) - 0.5)
+
+
+class _EP:
+    def __init__(self, name, obj, value="pkg.mod:Obj"):
+        self.name, self.value, self._obj = name, value, obj
+
+    def load(self):
+        if isinstance(self._obj, Exception):
+            raise self._obj
+        return self._obj
+
+
+@pytest.mark.parametrize("obj,words", [
+    (ImportError("No module named 'pkg'"), "cannot be imported: ImportError: No module named 'pkg'"),
+    (dict, "expected a subclass of recon.method.Method"),
+])
+def test_a_broken_plugin_is_refused_naming_its_entry_point(monkeypatch, obj, words):
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [_EP("broken", obj)])
+    with pytest.raises(registry.PluginError, match="method plug-in 'broken'") as exc:
+        registry.get_method("d3dgs")
+    assert words in str(exc.value)
+
+
+def test_a_plugin_whose_name_differs_from_its_entry_point_or_lacks_inputs_is_refused(monkeypatch):
+    from recon.methods.d3dgs import D3DGS
+
+    class NoInputs(D3DGS):
+        name = "no_inputs"
+        inputs = ()
+
+    class Renamed(D3DGS):
+        name = "other"
+
+    for cls, ep_name, words in ((NoInputs, "no_inputs", "inputs must name what the method sees"),
+                                (Renamed, "mine", "the entry point's name must be the method's name 'other'")):
+        monkeypatch.setattr(registry, "_plugins_loaded", False)
+        monkeypatch.setattr(registry, "entry_points", lambda group, c=cls, n=ep_name: [_EP(n, c)])
+        with pytest.raises(registry.PluginError, match=words):
+            registry.method_names()
+    assert "no_inputs" not in registry.METHODS and "other" not in registry.METHODS
