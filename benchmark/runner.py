@@ -70,9 +70,28 @@ def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callab
 
 
 def evaluate_model(method_obj, model, records, lpips_net: str | None, placement=None) -> dict:
-    """Scores of `model` on `records`, rendered on the run's (device, backend) (default: CPU, auto)."""
+    """Scores of `model` on `records`, rendered on the run's (device, backend) (default: CPU, auto),
+    over the whole images and, where the scene has dynamic masks, over the moving pixels (`*_dyn`)."""
     device, backend = placement or ("cpu", "auto")
-    return score_pairs(method_obj.eval_pairs(model.to(device), records, backend), lpips_net=lpips_net)
+    masks = [method_obj.dataset.dynamic_mask(r) for r in records]
+    return score_pairs(method_obj.eval_pairs(model.to(device), records, backend), lpips_net=lpips_net,
+                       masks=masks if any(m is not None for m in masks) else None)
+
+
+DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
+
+
+def has_masks(job: Job, data_root: Path) -> bool:
+    """Whether the job's scene folder has dynamic masks (`e4dgs masks`, or generated with them)."""
+    return (job_data_dir(job, data_root) / "dynamic" / "masks.json").exists()
+
+
+def complete_row(row: dict, job: Job, cfg: BenchConfig, data_root: Path) -> bool:
+    """Whether a finished row holds every score the job needs now: LPIPS where it is wanted, and the
+    dynamic-region scores once its scene has masks (a row scored before is scored again, from the
+    trained model: nothing is trained twice)."""
+    return (row.get("status") != "failed" and (row.get("lpips") is not None or not wants_lpips(job, cfg))
+            and ("psnr_dyn" in row or not has_masks(job, data_root)))
 
 
 def resolve_job(job: Job):
@@ -144,7 +163,9 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
         **job.identity(), **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
-        "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"], "data": data_stats(dataset),
+        **{k: final[k] for k in DYN_KEYS if k in final},
+        "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"],
+        **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}), "data": data_stats(dataset),
         "n_test_images": final["n_images"],
         "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
         "device": str(placement[0]), "backend": placement[1],
@@ -194,7 +215,9 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     write_text_atomic(out_root / "bench.json", json.dumps({"preset": preset_name, **dump(cfg)}, indent=1))
     results_path = out_root / "results.jsonl"
     rows = read_results(results_path)
-    done = {(r["key"], r["config_hash"]) for r in rows if r.get("status") != "failed"}
+    by_key = {j.key: j for j in todo}
+    done = {(r["key"], r["config_hash"]) for r in rows
+            if r.get("status") != "failed" and (r["key"] not in by_key or complete_row(r, by_key[r["key"]], cfg, data_root))}
     if cfg.description:
         log(f"bench {preset_name}: " + " ".join(cfg.description.split()))
     log(f"bench {preset_name}: {len(todo)} job(s) on {', '.join(needed)}; "
@@ -202,13 +225,18 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
 
     def record(new_rows: list[dict]) -> None:          # the driver is the only writer of results.jsonl
         nonlocal rows
+        old = {(r["key"], r.get("config_hash")): r for r in rows}
+        for r in new_rows:                              # scored again from a finished model: its training time stays
+            before = old.get((r["key"], r.get("config_hash")))
+            if before and (before.get("train_elapsed_s") or 0) > (r.get("train_elapsed_s") or 0):
+                r.update(train_elapsed_s=before["train_elapsed_s"], rescored_unix=int(time.time()))
         keys = {r["key"] for r in new_rows}
         rows = [r for r in rows if r["key"] not in keys] + new_rows
         write_results(results_path, rows)
 
     def scored(job: Job) -> dict | None:   # a finished row of the same training folder, if any
         return next((r for r in rows if r.get("run_dir") == job.folder and r.get("config_hash") == job.config_hash()
-                     and r.get("status") != "failed" and (r.get("lpips") is not None or not wants_lpips(job, cfg))), None)
+                     and complete_row(r, job, cfg, data_root)), None)
 
     t0 = time.time()
     remaining = [j for j in todo if (j.key, j.config_hash()) not in done]

@@ -177,7 +177,7 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
                   log=print) -> list[dict]:
     """Results rows of an outside method's renders, one per scene folder under `renders`. Every file
     is checked before anything is scored (RenderError names the first bad one)."""
-    from benchmark.runner import data_stats, versions
+    from benchmark.runner import DYN_KEYS, data_stats, versions
     from common.metrics.image import score_pairs
     from common.provenance import git_commit
     from datagen.speed import split_variant
@@ -203,7 +203,9 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
     for folder, ds, files, snaps in plan:
         t0 = time.time()
         scene, speed = split_variant(ds.dir.name)
-        final = score_pairs(load_pairs(ds, files, seen), lpips_net=lpips_net)
+        masks = [ds.dynamic_mask(r) for r in ds.frames("test")]
+        masks = masks if any(m is not None for m in masks) else None
+        final = score_pairs(load_pairs(ds, files, seen), lpips_net=lpips_net, masks=masks)
         snapshots = []
         for seconds, fs in snaps:
             s = score_pairs(load_pairs(ds, fs, seen), lpips_net=None)
@@ -216,7 +218,7 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
             "config": "", "overrides": {}, "speed": speed, "data_scene": ds.dir.name, "dataset": "",
             "config_hash": _digest(sorted(files.values())), "run_dir": str(folder),
             **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
-            "floor_psnr": None, "floor_psnr_luma": None, "data": data_stats(ds), "n_test_images": final["n_images"],
+            **{k: final[k] for k in DYN_KEYS if k in final}, "floor_psnr": None, "floor_psnr_luma": None, "data": data_stats(ds), "n_test_images": final["n_images"],
             "iterations": None, "n_gaussians": None, "channels": channels, "device": "", "backend": "",
             "wall_s": train_seconds, "train_elapsed_s": None, "eval_s": round(time.time() - t0, 1),
             "snapshots": sorted(snapshots, key=lambda p: p["wall_s"]), "versions": versions(),

@@ -39,6 +39,40 @@ def run_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_masks_parser(sub) -> None:
+    p = sub.add_parser("masks", help="add dynamic-region masks to scenes generated before they existed",
+                       description="Builds each scene in Blender from its scene.yaml (no rendering), casts a ray "
+                                   "through every pixel of every test view and tracks the surface over the clip: "
+                                   "dynamic/cam<k>/<index>.png in the scene and its speed variants. Scenes that have "
+                                   "masks are skipped unless --force.")
+    p.add_argument("path", type=Path, help="a scene folder, or a dataset root holding scene folders")
+    p.add_argument("--force", action="store_true", help="compute them again")
+    p.set_defaults(func=run_masks)
+
+
+def run_masks(args: argparse.Namespace) -> int:
+    import json
+    import subprocess
+
+    from common.taskpool import child_env
+    from datagen.verify import scene_dirs
+
+    scenes = scene_dirs(args.path)
+    if not scenes:
+        raise SystemExit(f"error: {args.path}: no manifest.json in it or in its sub-folders (not a generated dataset)")
+    for d in scenes:
+        manifest = json.loads((d / "manifest.json").read_text())
+        if manifest.get("speed"):           # a speed variant: its scene writes its masks
+            continue
+        if (d / "dynamic" / "masks.json").exists() and not args.force:
+            print(f"{d}: has masks, skipped")
+            continue
+        r = subprocess.run([sys.executable, "-m", "datagen.add_masks", str(d)], env=child_env())
+        if r.returncode != 0:
+            raise SystemExit(f"error: {d}: computing the dynamic masks failed (status {r.returncode})")
+    return 0
+
+
 def add_check_parser(sub) -> None:
     p = sub.add_parser("check", help="verify a dataset against its manifests (sizes, SHA-256, event files)",
                        description="Check every file a scene's manifest.json lists: present, same size and SHA-256, "

@@ -93,6 +93,13 @@ class SceneDataset:
         spans = {(e["camera"], e["index"]): (e["first_frame_us"], e["last_frame_us"]) for e in exposures}
         return self._read_transforms(self.dir / "blur" / level / "transforms_train.json", spans)
 
+    def dynamic_mask(self, rec: FrameRecord) -> np.ndarray | None:
+        """bool [H, W]: the test view's pixels whose surface moves (datagen.dynamic); None when the scene
+        has no masks."""
+        from datagen.dynamic import read_mask
+
+        return read_mask(self.dir, rec.camera, rec.index)
+
     def event_file(self, camera: int) -> Path:
         return self.dir / "events" / f"cam{camera}.h5"
 

@@ -82,6 +82,7 @@ class SceneJob:
         self.kept = np.arange(0, cfg.n_timestamps, cfg.frames.keep_every)
         self._kept_index = {int(i): j for j, i in enumerate(self.kept)}   # timestamp -> kept frame number
         self.blur: BlurReport | None = None   # exposures chosen from the scene geometry (run() measures them)
+        self.dynamic: dict[tuple[int, int], np.ndarray] = {}     # (camera, kept index) -> dynamic mask (test views)
         self.windows: dict[str, dict[int, tuple[int, int]]] = {}
         self.fingerprint = config_fingerprint(cfg)
 
@@ -114,6 +115,7 @@ class SceneJob:
         cams = R.build_scene(cfg, self.intr)
         t_blur = time.perf_counter()
         self._measure_blur()  # before anything is written: a level out of reach leaves no output behind
+        self.measure_dynamic()
         t_blur = time.perf_counter() - t_blur
         self.dir.mkdir(parents=True, exist_ok=True)
         renderer = R.ViewRenderer()
@@ -262,6 +264,26 @@ class SceneJob:
                     f"{name} {lv['n_frames']} frames ({lv['exposure_ms']:.2f} ms): {lv['median_px']:.1f} px"
                     for name, lv in levels.items()), flush=True)
 
+    def dynamic_views(self) -> list[tuple[int, int]]:
+        """(camera, kept index) of the views with a dynamic mask: the test views, and the contact sheet's."""
+        test = [j for j in range(len(self.kept)) if j % self.cfg.frames.test_every == 0]
+        return [(k, j) for k in range(self.cfg.camera.n_cameras) for j in sorted(set(test) | {len(self.kept) // 2})]
+
+    def measure_dynamic(self) -> None:
+        """The dynamic masks (datagen.dynamic) of the scene currently built, for it and its speed
+        variants (the same views of the same frames)."""
+        from datagen.dynamic import THRESHOLD_PX
+        from datagen.render_geometry import RigidMotionError, dynamic_masks
+
+        views = self.dynamic_views()
+        try:
+            by_time = dynamic_masks(self.tau, [(k, int(self.kept[j])) for k, j in views], self.poses, self.intr.K,
+                                    self.cfg.render.width, self.cfg.render.height, THRESHOLD_PX)
+        except RigidMotionError as exc:
+            raise RigidMotionError(f"scene {self.cfg.name}: {exc}") from None
+        for job in self.jobs:
+            job.dynamic = {(k, j): by_time[(k, int(self.kept[j]))] for k, j in views}
+
     def _checkpoint(self, ckpt, next_index, streams, seconds, t_start) -> None:
         state = {"next_index": next_index}
         elapsed = time.perf_counter() - t_start
@@ -300,8 +322,12 @@ class SceneJob:
         labels = {level: [f"{m:.1f} px" for m in self.blur.view_median_px[level][:, mid]] for level in self.windows}
         if self._is_variant:
             labels = {f"x{cfg.speed:g} {lv} {cfg.blur.exposure_ms[lv]:g} ms": v for lv, v in labels.items()}
+        if self.dynamic:
+            from datagen.dynamic import write_masks
+
+            write_masks(d, {v: m for v, m in self.dynamic.items() if v[1] % cfg.frames.test_every == 0})
         contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png",
-                      folders=list(self.windows))
+                      folders=list(self.windows), dynamic=[self.dynamic.get((k, mid)) for k in range(C)])
         if self.variants:
             speed_sheet(d, [v.dir for v in self.variants], mid, d / "preview" / "speeds.png")
         seconds["write"] += time.perf_counter() - t_write

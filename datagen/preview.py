@@ -1,7 +1,8 @@
 """Contact sheet of a generated scene and the blurred-vs-sharp PSNR of its blur levels.
 
 The contact sheet has one row per camera: the sharp RGB frame, the same frame at every blur level
-(labelled with its measured blur length), and the events around it.
+(labelled with its measured blur length), the events around it, and its dynamic region (the pixels
+whose surface moves, datagen.dynamic) tinted on the sharp frame.
 """
 from __future__ import annotations
 
@@ -29,10 +30,19 @@ def _rgb8(path: Path) -> np.ndarray:
     return np.round(SceneDataset.load_image(path) * 255.0).astype(np.uint8)
 
 
+def dynamic_overlay(rgb8: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The frame dimmed, its dynamic pixels tinted orange."""
+    out = (rgb8.astype(np.float32) * 0.45).astype(np.uint8)
+    out[mask] = (0.5 * rgb8[mask] + 0.5 * np.array([255, 140, 0])).astype(np.uint8)
+    return out
+
+
 def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, window_us: int,
-                  blur_labels: dict[str, list[str]], out: Path, folders: list[str] | None = None) -> Path:
+                  blur_labels: dict[str, list[str]], out: Path, folders: list[str] | None = None,
+                  dynamic: list[np.ndarray | None] | None = None) -> Path:
     """Per camera a row: sharp | each blur level in blur_labels' order (labelled "<level> <label[k]>";
-    read from blur/<folders[i]>, default the level names) | events in [t - w/2, t + w/2)."""
+    read from blur/<folders[i]>, default the level names) | events in [t - w/2, t + w/2) | the
+    dynamic mask dynamic[k] over the sharp frame (when given)."""
     rows = []
     name = f"{frame_index:05d}.png"
     folders = folders or list(blur_labels)
@@ -42,6 +52,9 @@ def contact_sheet(scene_dir: Path, n_cameras: int, frame_index: int, t_us: int, 
             row.append(_label(_rgb8(scene_dir / "blur" / folder / f"cam{k}" / name), f"{level} {labels[k]}"))
         ev = read_window(scene_dir / "events" / f"cam{k}.h5", t_us - window_us // 2, t_us + window_us // 2)
         row.append(_label(event_frame(ev), f"{len(ev)} ev / {window_us / 1000:.3g} ms"))
+        if dynamic is not None and dynamic[k] is not None:
+            row.append(_label(dynamic_overlay(_rgb8(scene_dir / "rgb" / f"cam{k}" / name), dynamic[k]),
+                              f"dynamic {100 * dynamic[k].mean():.1f} % px"))
         rows.append(np.concatenate(row, axis=1))
     return write_png(out, np.concatenate(rows, axis=0))
 

@@ -82,20 +82,28 @@ class GeometrySampler:
     def cast(snapshot, c2w: np.ndarray, K: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """First surface hit of the ray through each pixel [N, 2] of an OpenCV camera c2w [4, 4] in a
         snapshot: (points in their part's frame [M, 3], part index [M]) for the M rays that hit."""
+        pts, idx, _hit = GeometrySampler.cast_hits(snapshot, c2w, K, pixels)
+        return pts, idx
+
+    @staticmethod
+    def cast_hits(snapshot, c2w: np.ndarray, K: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`cast`, and which of the N rays hit (bool [N], in the order of the M points)."""
         bvh, owner, mats = snapshot
         rays = np.concatenate([pixels, np.ones((len(pixels), 1))], 1) @ np.linalg.inv(K).T @ c2w[:3, :3].T
         origin = mathutils.Vector(c2w[:3, 3].tolist())
-        pts, idx = [], []
-        for d in rays:
-            loc, _normal, face, _dist = bvh.ray_cast(origin, mathutils.Vector(d.tolist()))
+        cast, Vector = bvh.ray_cast, mathutils.Vector
+        pts, idx, hit = [], [], np.zeros(len(rays), bool)
+        for n, d in enumerate(rays.tolist()):
+            loc, _normal, face, _dist = cast(origin, Vector(d))
             if face is not None:
                 pts.append(tuple(loc))
                 idx.append(owner[face])
+                hit[n] = True
         if not pts:
-            return np.zeros((0, 3)), np.zeros(0, np.int64)
+            return np.zeros((0, 3)), np.zeros(0, np.int64), hit
         pts, idx = np.array(pts, np.float64), np.array(idx, np.int64)
         inv = np.linalg.inv(mats[idx])
-        return np.einsum("nij,nj->ni", inv[:, :3, :3], pts) + inv[:, :3, 3], idx
+        return np.einsum("nij,nj->ni", inv[:, :3, :3], pts) + inv[:, :3, 3], idx, hit
 
 
 def sample_scene_motion(tau: np.ndarray, centers: np.ndarray, poses: np.ndarray, K: np.ndarray, width: int,
@@ -120,3 +128,28 @@ def sample_scene_motion(tau: np.ndarray, centers: np.ndarray, poses: np.ndarray,
         for k in range(poses.shape[0]):
             samples[(k, j)] = sampler.cast(snap, poses[k, i], K, pixels)
     return mats, samples
+
+
+def dynamic_masks(tau: np.ndarray, views: list[tuple[int, int]], poses: np.ndarray, K: np.ndarray, width: int,
+                  height: int, threshold_px: float) -> dict[tuple[int, int], np.ndarray]:
+    """The dynamic mask (datagen.dynamic) of every view (camera k, rendered-time index i), for the scene
+    currently built: a ray through every pixel at time tau[i], each hit tracked over the whole clip.
+    poses [C, T, 4, 4] OpenCV c2w. Raises RigidMotionError if a part deforms."""
+    from datagen.dynamic import mask_image, surface_motion_px
+
+    sampler = GeometrySampler()
+    sampler.check_rigid([tau[0], tau[len(tau) // 2], tau[-1]])
+    mats = np.empty((len(tau), len(sampler.objects), 4, 4))
+    for i, t in enumerate(tau):
+        R.set_time(float(t))
+        mats[i] = sampler.matrices()
+    pixels = pixel_grid(width, height, 1)
+    out = {}
+    for i in sorted({i for _, i in views}):
+        R.set_time(float(tau[i]))
+        snap = sampler.snapshot()
+        for k in sorted({k for k, j in views if j == i}):
+            local, obj, hit = sampler.cast_hits(snap, poses[k, i], K, pixels)
+            out[(k, i)] = mask_image(hit, surface_motion_px(local, obj, mats, poses[k, i], K[0, 0], i),
+                                     width, height, threshold_px)
+    return out

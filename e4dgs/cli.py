@@ -17,7 +17,7 @@ from common.config import ConfigWarning
 
 def build_parser() -> argparse.ArgumentParser:
     from benchmark.cli import add_bench_parser, add_score_parser, add_testviews_parser
-    from datagen.cli import add_check_parser, add_dataset_parser
+    from datagen.cli import add_check_parser, add_dataset_parser, add_masks_parser
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
     from simulator.cli import add_simulate_parser, add_view_parser
@@ -29,6 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_view_parser(sub)
     add_dataset_parser(sub)
     add_check_parser(sub)
+    add_masks_parser(sub)
     add_train_parser(sub)
     add_render_parser(sub)
     add_train_e2vid_parser(sub)

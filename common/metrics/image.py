@@ -15,18 +15,41 @@ from skimage.metrics import structural_similarity
 from common.color import srgb_luma
 from common.metrics import psnr
 
+SSIM_PAD = 5        # (window 11 - 1) / 2: the border skimage leaves out of the mean for sigma 1.5
+
 
 def ssim(pred: np.ndarray, ref: np.ndarray) -> float:
     """SSIM of one image pair [H, W] or [H, W, C] in [0, 1]."""
+    return ssim_with_region(pred, ref)[0]
+
+
+def ssim_with_region(pred: np.ndarray, ref: np.ndarray, mask: np.ndarray | None = None) -> tuple[float, float | None]:
+    """(SSIM of the pair, mean of its SSIM map over `mask` [H, W] bool, or None). Like the whole-image
+    value, the region's mean leaves out the filter radius (5 px) along the border; a mask of ones
+    gives the whole-image SSIM."""
     if pred.shape != ref.shape:
         raise ValueError(f"ssim: shapes differ: {pred.shape} vs {ref.shape}")
     p = np.asarray(pred, np.float64)
     r = np.asarray(ref, np.float64)
     if p.ndim == 3 and p.shape[-1] == 1:
         p, r = p[..., 0], r[..., 0]
-    return float(structural_similarity(p, r, data_range=1.0, gaussian_weights=True, sigma=1.5,
-                                       use_sample_covariance=False,
-                                       channel_axis=-1 if p.ndim == 3 else None))
+    whole, smap = structural_similarity(p, r, data_range=1.0, gaussian_weights=True, sigma=1.5,
+                                        use_sample_covariance=False, channel_axis=-1 if p.ndim == 3 else None,
+                                        full=True)
+    if mask is None:
+        return float(whole), None
+    inner = np.zeros(mask.shape, bool)
+    inner[SSIM_PAD:-SSIM_PAD, SSIM_PAD:-SSIM_PAD] = mask[SSIM_PAD:-SSIM_PAD, SSIM_PAD:-SSIM_PAD]
+    if not inner.any():
+        return float(whole), None
+    return float(whole), float(smap[inner].mean())
+
+
+def psnr_region(pred: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
+    """PSNR over the pixels of `mask` [H, W] bool (every channel), capped at 100 dB."""
+    d = (np.asarray(pred, np.float64) - np.asarray(ref, np.float64))[mask]
+    mse = float(np.mean(d * d))
+    return min(100.0, 10.0 * np.log10(1.0 / mse)) if mse > 0 else 100.0
 
 
 def luma(image: np.ndarray) -> np.ndarray:
@@ -37,19 +60,41 @@ def luma(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def score_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str | None = "vgg") -> dict[str, float]:
+def score_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str | None = "vgg",
+                masks: list[np.ndarray | None] | None = None) -> dict[str, float]:
     """Mean PSNR / SSIM (/ LPIPS) over (prediction, ground truth) pairs; inf PSNRs are capped at 100 dB.
     `psnr_luma` is the PSNR of both images' luma: the target events-only methods are scored on, so
-    colour and grayscale methods can be compared on the same quantity (equal to `psnr` for gray)."""
+    colour and grayscale methods can be compared on the same quantity (equal to `psnr` for gray).
+
+    With `masks` (a dynamic-region mask [H, W] bool, or None, per pair) the same scores over the masked
+    pixels are added as psnr_dyn / psnr_luma_dyn / ssim_dyn (/ lpips_dyn): means over the views whose
+    mask has pixels (`n_dyn_images`), and `dyn_fraction`, the masked share of all pixels."""
     pairs = list(pairs)
     if not pairs:
         raise ValueError("score_pairs: no image pairs")
+    masks = list(masks) if masks is not None else [None] * len(pairs)
+    if len(masks) != len(pairs):
+        raise ValueError(f"score_pairs: {len(masks)} masks for {len(pairs)} pairs")
+    masks = [m if m is not None and m.any() else None for m in masks]
+    ssims = [ssim_with_region(p, r, m) for (p, r), m in zip(pairs, masks)]
     out = {"psnr": float(np.mean([min(psnr(p, r), 100.0) for p, r in pairs])),
            "psnr_luma": float(np.mean([min(psnr(luma(p), luma(r)), 100.0) for p, r in pairs])),
-           "ssim": float(np.mean([ssim(p, r) for p, r in pairs])),
+           "ssim": float(np.mean([s for s, _ in ssims])),
            "n_images": len(pairs)}
+    dyn = [(p, r, m) for (p, r), m in zip(pairs, masks) if m is not None]
+    if dyn:
+        out.update(psnr_dyn=float(np.mean([psnr_region(p, r, m) for p, r, m in dyn])),
+                   psnr_luma_dyn=float(np.mean([psnr_region(luma(p), luma(r), m) for p, r, m in dyn])),
+                   n_dyn_images=len(dyn),
+                   dyn_fraction=float(np.mean([m.mean() if m is not None else 0.0 for m in masks])))
+        region_ssims = [d for _, d in ssims if d is not None]      # masks within the border have none
+        if region_ssims:
+            out["ssim_dyn"] = float(np.mean(region_ssims))
     if lpips_net:
-        from common.metrics.lpips import lpips_distance
-        out["lpips"] = float(np.mean([lpips_distance(p, r, lpips_net) for p, r in pairs]))
+        from common.metrics.lpips import lpips_with_region
+        both = [lpips_with_region(p, r, lpips_net, m) for (p, r), m in zip(pairs, masks)]
+        out["lpips"] = float(np.mean([w for w, _ in both]))
+        if dyn:
+            out["lpips_dyn"] = float(np.mean([d for _, d in both if d is not None]))
     assert all(math.isfinite(v) for v in out.values())
     return out

@@ -141,31 +141,57 @@ class LPIPS(nn.Module):
                 out.append(x)
         return out
 
-    def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    def layer_maps(self, x: torch.Tensor, y: torch.Tensor) -> list[torch.Tensor]:
+        """Per tapped layer the weighted feature distance map [B, h_l, w_l]; LPIPS is the sum of their means."""
         if x.shape != y.shape or x.ndim != 4 or x.shape[1] not in (1, 3):
             raise ValueError(f"expected two [B, 3 (or 1), H, W] images of one shape, got {tuple(x.shape)}, {tuple(y.shape)}")
         if x.shape[1] == 1:                      # grayscale: three equal channels
             x, y = x.expand(-1, 3, -1, -1), y.expand(-1, 3, -1, -1)
         fx = self.taps(((2 * x - 1) - self.shift) / self.scale)
         fy = self.taps(((2 * y - 1) - self.shift) / self.scale)
-        total = 0.0
+        maps = []
         for a, b, w in zip(fx, fy, self.lins):
             na = a / (torch.sqrt((a * a).sum(1, keepdim=True)) + 1e-10)
             nb = b / (torch.sqrt((b * b).sum(1, keepdim=True)) + 1e-10)
-            total = total + (((na - nb) ** 2) * w).sum(1).mean((1, 2))
+            maps.append((((na - nb) ** 2) * w).sum(1))
+        return maps
+
+    def forward(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+        return sum(m.mean((1, 2)) for m in self.layer_maps(x, y))
+
+    @staticmethod
+    def masked(maps: list[torch.Tensor], mask: torch.Tensor) -> torch.Tensor:
+        """LPIPS over a region: each layer's map averaged with the mask [B, 1, H, W] (0..1) area-resized to
+        that layer's size as weights, summed over layers (a mask of ones gives LPIPS itself)."""
+        total = 0.0
+        for m in maps:
+            w = torch.nn.functional.interpolate(mask, size=m.shape[-2:], mode="area")[:, 0]
+            total = total + (m * w).sum((1, 2)) / w.sum((1, 2)).clamp_min(1e-12)
         return total
 
 
 _CACHE: dict[str, LPIPS] = {}
 
 
+def _to_t(a: np.ndarray) -> torch.Tensor:
+    a = np.asarray(a, np.float32)
+    a = a[..., None] if a.ndim == 2 else a
+    return torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1)[None]
+
+
 def lpips_distance(pred: np.ndarray, gt: np.ndarray, net: str = "vgg") -> float:
     """LPIPS of one image pair [H, W] or [H, W, C] in [0, 1] (grayscale as three equal channels)."""
+    return lpips_with_region(pred, gt, net)[0]
+
+
+def lpips_with_region(pred: np.ndarray, gt: np.ndarray, net: str = "vgg",
+                      mask: np.ndarray | None = None) -> tuple[float, float | None]:
+    """(LPIPS of the pair, LPIPS over the region `mask` [H, W] bool, or None without one) in one pass."""
     if net not in _CACHE:
         _CACHE[net] = LPIPS(net)
-    def to_t(a):
-        a = np.asarray(a, np.float32)
-        a = a[..., None] if a.ndim == 2 else a
-        return torch.from_numpy(a).permute(2, 0, 1)[None]
     with torch.no_grad():
-        return float(_CACHE[net](to_t(pred), to_t(gt))[0])
+        maps = _CACHE[net].layer_maps(_to_t(pred), _to_t(gt))
+        whole = float(sum(m.mean((1, 2)) for m in maps)[0])
+        if mask is None or not mask.any():
+            return whole, None
+        return whole, float(LPIPS.masked(maps, _to_t(mask.astype(np.float32)))[0])

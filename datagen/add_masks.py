@@ -1,0 +1,46 @@
+"""Add dynamic-region masks (datagen.dynamic) to scenes generated before they existed, without
+rendering again: the scene is built in Blender from its scene.yaml, every test view's pixels are
+cast into it and tracked over the clip, and the masks go into the scene and its speed variants.
+New scenes get them from `e4dgs dataset` (the same SceneJob.measure_dynamic).
+
+    python -m datagen.add_masks data/quick/hinge          # `e4dgs masks data/quick` runs this per scene
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from datagen import render as R
+from datagen.dataset import SceneDataset
+from datagen.dynamic import write_masks
+from datagen.generate import SceneJob
+
+
+def add_masks(scene_dir: Path) -> list[Path]:
+    """Masks for the scene at scene_dir (a scene, not a speed variant) and its variants beside it;
+    returns the folders written."""
+    ds = SceneDataset(scene_dir)
+    cfg = ds.config
+    job = SceneJob(cfg, scene_dir.parent, ds.manifest.get("preset", "custom"), progress=False, folder=scene_dir.name)
+    R.build_scene(cfg, job.intr)
+    job.measure_dynamic()
+    written = []
+    for j in job.jobs:
+        if (j.dir / "manifest.json").exists():
+            write_masks(j.dir, {v: m for v, m in j.dynamic.items() if v[1] % cfg.frames.test_every == 0})
+            written.append(j.dir)
+    return written
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scene_dir", type=Path)
+    args = ap.parse_args(argv)
+    for d in add_masks(args.scene_dir):
+        print(f"masks: {d / 'dynamic'}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
