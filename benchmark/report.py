@@ -118,6 +118,7 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
         md.write("Speed variants: " + "; ".join(f"{label} at x{sp:g}" for label, sp in speeds) + " (the same motion "
                  "x times faster; its blurred frames and its events). The others train on the scene at speed 1.\n")
     md.write(luma_table(scenes, table, cells, labels))
+    md.write(dynamic_table(scenes, table, cells, labels))
     md.write(floor_table(scenes, table, cells, labels))
     if len(scenes) > 1:
         md.write("\n### Per scene\n\n| Scene | Method | PSNR↑ | SSIM↑ | LPIPS↓ | Iterations | Train (s) | Gaussians |\n"
@@ -155,6 +156,36 @@ def floor_table(scenes: list[str], table, cells: list[str], labels: dict[str, st
         md.write(f"| {labels.get(c, c)} | " + " | ".join(vals) + " |\n")
     md.write("\nFloor: the method's own starting model (its initial points, nothing trained) scored the same way, after "
              "the same correction. For events-only methods the gain / offset fit alone lifts a flat image to it.\n")
+    return md.getvalue()
+
+
+def dynamic_table(scenes: list[str], table, cells: list[str], labels: dict[str, str]) -> str:
+    """PSNR over the moving pixels (the scenes' dynamic masks) next to the whole image's, per scene and on
+    average, with SSIM and LPIPS over the same pixels on average; ranks on the region's columns."""
+    if not any(table[c].get(s, {}).get("psnr_dyn") is not None for c in cells for s in scenes):
+        return ""
+    cols = [(s, "psnr_dyn") for s in scenes] + [("average", k) for k in ("psnr_dyn", "ssim_dyn", "lpips_dyn")]
+    values = {col: {c: (_average(table, c, scenes, col[1]) if col[0] == "average" else table[c].get(col[0], {}).get(col[1]))
+                    for c in cells} for col in cols}
+    ranks = {col: _rank_marks(values[col], higher=col[1] != "lpips_dyn") for col in cols}
+    md = io.StringIO()
+    md.write("\n### Dynamic region: the pixels that move\n\n| Method | "
+             + " | ".join(f"{s} PSNR (whole)" for s in scenes)
+             + " | Average PSNR (whole) | Average SSIM | Average LPIPS |\n|---|" + "---|" * (len(scenes) + 3) + "\n")
+    for c in cells:
+        vals = []
+        for col in cols:
+            key = col[1].removesuffix("_dyn")
+            whole = (_average(table, c, scenes, key) if col[0] == "average" else table[c].get(col[0], {}).get(key))
+            text = _mark(_fmt(key, values[col][c]), ranks[col].get(c, ""))
+            vals.append(f"{text} ({_fmt(key, whole)})" if key == "psnr" else text)
+        md.write(f"| {labels.get(c, c)} | " + " | ".join(vals) + " |\n")
+    frac = [next((table[c][s].get("dyn_fraction") for c in cells if table[c].get(s, {}).get("dyn_fraction") is not None),
+                 None) for s in scenes]
+    md.write("\nScores over each test view's dynamic pixels only (the scene's masks: a pixel is dynamic when the "
+             "surface it sees moves >= 2 px over the clip as seen from that view), whole-image PSNR in brackets, "
+             "after the same correction; means over the views with dynamic pixels. Dynamic share of the pixels: "
+             + ", ".join(f"{s} {100 * f:.1f} %" for s, f in zip(scenes, frac) if f is not None) + ".\n")
     return md.getvalue()
 
 

@@ -29,7 +29,8 @@ class SpeedRoles:
 
 FLOOR_MARGIN_DB = 1.0                         # above the floor by less than this: "rests on the floor"
 PROTOCOLS = (("psnr", "floor_psnr", "paper protocol (colour for RGB inputs, gray after gain/offset for events only)"),
-             ("psnr_luma", "floor_psnr_luma", "luma (every method on the gray target)"))
+             ("psnr_luma", "floor_psnr_luma", "luma (every method on the gray target)"),
+             ("psnr_dyn", "floor_psnr_dyn", "dynamic region (paper protocol over the pixels that move)"))
 
 
 def speed_grid(rows: list[dict]) -> dict[tuple[str, str], dict[str, dict[float, dict]]]:
@@ -126,6 +127,8 @@ def speed_tables(rows: list[dict], roles: SpeedRoles = SpeedRoles(), order: tupl
         md.write(f"\n## {title}\n\nPer speed: blur median / p90, blurred vs sharp PSNR, events per second per camera: "
                  + "; ".join(_speed_header(speeds, cells)) + ".\n")
         for key, floor_key, what in PROTOCOLS:
+            if not any(r.get(key) is not None for c in cells.values() for r in c.values()):
+                continue                                   # rows scored before this protocol existed
             md.write(f"\n**PSNR, {what}** (dB; floor in brackets)\n\n| Method | " + " | ".join(f"x{s:g}" for s in speeds)
                      + " |\n|---|" + "---|" * len(speeds) + "\n")
             ref = sharp.get(scene)
@@ -156,7 +159,8 @@ def crossing_lines(cells: dict[str, dict[float, dict]], speeds: list[float], key
     rgb = cells.get(rgb_ref, {})
     lines = []
     for cell in [c for c in _ordered(cells, order) if _sees_events(cells[c])]:
-        ahead = [(cells[cell][s][key] - rgb[s][key]) if s in cells[cell] and s in rgb else None for s in speeds]
+        ahead = [(cells[cell][s][key] - rgb[s][key]) if s in cells[cell] and s in rgb
+                 and cells[cell][s].get(key) is not None and rgb[s].get(key) is not None else None for s in speeds]
         s_x, how = crossing_speed(speeds, ahead)
         label = labels[cell]
         if how == "no data":

@@ -130,3 +130,32 @@ def test_rows_without_region_scores_are_scored_again_without_training(motion_sce
     assert again["train_elapsed_s"] == 1234.5 and "rescored_unix" in again
     assert len((out / row["run_dir"] / "log.jsonl").read_text().splitlines()) == log_lines     # nothing trained
     assert read_results(out / "results.jsonl")[0]["psnr_dyn"] == again["psnr_dyn"]
+
+
+def test_the_leaderboard_and_the_speed_study_show_the_region_scores(tmp_path):
+    from bench_cells import LABELS, described
+    from benchmark.report import write_report
+    from benchmark.speed_report import speed_tables
+
+    def row(cell, scene, whole, dyn, study="main", speed=None):
+        r = described({"key": f"{study}/{scene}/{cell}/{speed or ''}", "study": study, "scene": scene, "cell": cell,
+                       "variant": f"x{speed:g}" if speed else "", "speed": speed, "psnr": whole, "ssim": 0.9,
+                       "lpips": 0.2, "psnr_luma": whole, "wall_s": 10.0, "iterations": 5, "n_gaussians": 3,
+                       "snapshots": [], "floor_psnr": 10.0, "floor_psnr_luma": 10.0})
+        if dyn is not None:
+            r.update(psnr_dyn=dyn, ssim_dyn=dyn / 40, lpips_dyn=1 / dyn, dyn_fraction=0.25, floor_psnr_dyn=9.0)
+        return r
+
+    rows = [row("d3dgs_sharp", "a", 30.0, 20.0), row("e4dgs", "a", 25.0, 22.0)]
+    write_report(rows, tmp_path)
+    md = (tmp_path / "leaderboard.md").read_text()
+    table = md.split("### Dynamic region")[1]
+    assert f"| {LABELS['e4dgs']} | **22.00** (25.00) | **22.00** (25.00) | **0.550** | **0.045** |" in table
+    assert f"| {LABELS['d3dgs_sharp']} | <u>20.00</u> (30.00) |" in table and "a 25.0 %" in table
+    assert "### Dynamic region" not in (write_report([row("e4dgs", "a", 25.0, None)], tmp_path) and
+                                        (tmp_path / "leaderboard.md").read_text())
+    speed = [row("d3dgs_blur", "a", 20.0, 15.0, "speed", 2.0), row("e4dgs", "a", 19.0, 16.0, "speed", 2.0)]
+    md = speed_tables(speed)
+    assert "dynamic region (paper protocol over the pixels that move)" in md
+    assert f"| {LABELS['e4dgs']} | 16.00 (9.00) |" in md
+    assert "dynamic region" not in speed_tables([{**r, "psnr_dyn": None} for r in speed])
