@@ -6,8 +6,11 @@ so the smear a surface point leaves is the polyline through its projections at t
 Its length in pixels is the blur length of that point. The renderer side
 (`datagen.render_geometry`) casts a ray through every n-th pixel at the window's centre frame, keeps
 the first surface hit in its object's local frame, and records every object's world matrix at every
-rendered timestamp; the functions here turn that into image paths. Parts move rigidly (checked by
-the renderer side), so a local point and its object's matrix give its world position at any time.
+rendered timestamp; the functions here turn that into image paths. A rigid part's local point and
+its matrix give its world position at any time. A deforming part (armature, shape keys, modifiers,
+cloth) keeps its hits as (triangle, barycentric coordinates) on its evaluated mesh, whose world
+vertices are recorded at every timestamp (`PartMotion`), so a surface point is tracked exactly
+however the mesh bends; only a mesh whose topology changes cannot be tracked.
 
 Statistics over many views are accumulated in log-spaced histograms (relative bin width 0.4 %), so
 choosing an exposure among hundreds of candidates does not keep every path in memory.
@@ -32,15 +35,48 @@ def _affine(A: np.ndarray, pts: np.ndarray) -> np.ndarray:
                      for r in range(3)], -1)
 
 
-def track_world(local_pts: np.ndarray, obj_index: np.ndarray, obj_mats: np.ndarray) -> np.ndarray:
+@dataclass
+class PartMotion:
+    """How every part moves over the rendered times: `mats` [T, O, 4, 4] part-to-world (identity for a
+    deforming part) and, for each deforming part o, `deform[o]` = (triangles [F, 3], world vertices
+    [T, V, 3]). Sliced over time like the matrix array it generalises (motion[a:b])."""
+    mats: np.ndarray
+    deform: dict
+
+    @property
+    def shape(self) -> tuple:
+        return self.mats.shape
+
+    def __getitem__(self, t) -> "PartMotion":
+        if not isinstance(t, slice):
+            raise TypeError("PartMotion is sliced over time only (motion[a:b])")
+        return PartMotion(self.mats[t], {o: (tri, v[t]) for o, (tri, v) in self.deform.items()})
+
+
+def barycentric_world(tris: np.ndarray, verts: np.ndarray, coords: np.ndarray) -> np.ndarray:
+    """World positions [T, N, 3] of points (triangle index, b1, b2) [N, 3] on a mesh whose world
+    vertices are verts [T, V, 3]: (1 - b1 - b2) v0 + b1 v1 + b2 v2 of the triangle tris[f]."""
+    f = coords[:, 0].astype(np.int64)
+    b1, b2 = coords[None, :, 1, None], coords[None, :, 2, None]
+    v0, v1, v2 = (verts[:, tris[f, c]] for c in range(3))
+    return (1.0 - b1 - b2) * v0 + b1 * v1 + b2 * v2
+
+
+def track_world(local_pts: np.ndarray, obj_index: np.ndarray, obj_mats) -> np.ndarray:
     """World positions [T, N, 3] of points given in their object's frame.
 
-    local_pts [N, 3]; obj_index [N] into obj_mats' objects; obj_mats [T, O, 4, 4] object-to-world.
+    local_pts [N, 3]; obj_index [N] into obj_mats' objects; obj_mats [T, O, 4, 4] object-to-world, or
+    a PartMotion, whose deforming parts' points are (triangle, b1, b2) on their evaluated mesh.
     """
-    out = np.empty((obj_mats.shape[0], len(local_pts), 3))
+    deform = getattr(obj_mats, "deform", {})
+    mats = getattr(obj_mats, "mats", obj_mats)
+    out = np.empty((mats.shape[0], len(local_pts), 3))
     for o in np.unique(obj_index):
         sel = obj_index == o
-        out[:, sel] = _affine(obj_mats[:, o], local_pts[sel])
+        if int(o) in deform:
+            out[:, sel] = barycentric_world(*deform[int(o)], local_pts[sel])
+        else:
+            out[:, sel] = _affine(mats[:, o], local_pts[sel])
     return out
 
 

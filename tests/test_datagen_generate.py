@@ -133,6 +133,35 @@ def test_blur_length_of_a_sliding_board_is_the_analytic_one(tmp_path):
     assert blur["px_per_frame"]["median"] == pytest.approx(px_per_frame, rel=2e-3)
 
 
+def test_blur_of_a_board_moved_by_a_shape_key_equals_the_rigid_boards(tmp_path):
+    """blur_plane_deform moves blur_plane's board by a shape key (the object never moves): its surface
+    points are tracked on the deforming mesh by triangle and barycentric coordinates, so every blur
+    figure equals the rigidly moved board's, and every pixel is dynamic."""
+    figures = {}
+    for name in ("blur_plane", "blur_plane_deform"):
+        r = generate(tmp_path, scene=name, preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+                     extra=["--scene-config", str(ROOT / "blender_scenes" / f"{name}.yaml")])
+        assert r.returncode == 0, r.stderr
+        m = json.loads((tmp_path / name / "manifest.json").read_text())
+        figures[name] = {lv: (v["n_frames"], v["median_px"], v["p90_px"]) for lv, v in m["blur"]["levels"].items()}
+        masks = json.loads((tmp_path / name / "dynamic" / "masks.json").read_text())
+        assert all(v["dynamic_fraction"] == 1.0 for v in masks["views"])
+    rigid, deform = figures["blur_plane"], figures["blur_plane_deform"]
+    assert rigid.keys() == deform.keys()
+    for lv in rigid:
+        assert deform[lv][0] == rigid[lv][0]
+        assert deform[lv][1:] == pytest.approx(rigid[lv][1:], rel=1e-3)
+
+
+def test_a_mesh_whose_topology_changes_is_refused_naming_it_and_nothing_is_written(tmp_path):
+    r = generate(tmp_path / "out", scene="blur_plane_topology", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+                 extra=["--scene-config", str(ROOT / "blender_scenes" / "blur_plane_topology.yaml")])
+    assert r.returncode != 0
+    line = r.stderr.strip().splitlines()[-1]
+    assert "part 'face' changes its mesh topology" in line and "scene blur_plane_topology" in line, r.stderr
+    assert not (tmp_path / "out" / "blur_plane_topology").exists()
+
+
 def test_a_blur_level_out_of_reach_is_refused_and_writes_nothing(tmp_path):
     bad = tmp_path / "plane.yaml"
     bad.write_text((ROOT / "blender_scenes" / "blur_plane.yaml").read_text().replace("strong: 9.0", "strong: 90.0"))
