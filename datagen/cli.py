@@ -17,13 +17,45 @@ def add_dataset_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="dataset root (default data/<preset>)")
     p.add_argument("--jobs", type=positive_int, default=1, help="scenes generated side by side (default 1)")
     p.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
+    p.add_argument("--scene-file", type=Path, default=None,
+                   help="your own animated scene instead of the preset's: .blend, .glb/.gltf, .fbx, .obj, .usd*, .abc "
+                        "(the preset's overrides apply; docs/dataset.md, 'Make a dataset from your own scene')")
+    p.add_argument("--kind", choices=("object", "room"), default="object",
+                   help="with --scene-file: cameras around the content (object) or inside it (room)")
+    p.add_argument("--scene-config", type=Path, default=None,
+                   help="a scene YAML (e.g. one with source: {file: ...}) instead of the preset's scenes")
     add_ray_arguments(p, "each scene's generation")
     p.set_defaults(func=run_dataset)
+
+
+def run_one_scene(args: argparse.Namespace) -> int:
+    """--scene-file / --scene-config: one scene, in a worker process like every scene."""
+    import subprocess
+
+    from common.config import read_yaml_mapping
+    from common.taskpool import child_env
+
+    out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
+    cmd = [sys.executable, "-m", "datagen.generate", "--preset", str(args.preset), "--out", str(out),
+           "--checkpoint-every", str(args.checkpoint_every)]
+    if args.scene_config:
+        name = read_yaml_mapping(args.scene_config).get("name")
+        if not isinstance(name, str) or not name:
+            raise SystemExit(f"error: {args.scene_config}: name: expected the scene's name")
+        cmd += ["--scene", name, "--scene-config", str(args.scene_config)]
+    if args.scene_file:
+        cmd += ["--scene-file", str(args.scene_file), "--kind", args.kind]
+    r = subprocess.run(cmd, env=child_env())
+    return 1 if r.returncode else 0
 
 
 def run_dataset(args: argparse.Namespace) -> int:
     from datagen.build import generate_dataset, preset_scenes
 
+    if args.scene_file or args.scene_config:
+        if args.scene_file and args.scene_config:
+            raise SystemExit("error: give --scene-file or --scene-config, not both (a scene YAML names its file itself)")
+        return run_one_scene(args)
     wanted = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
     scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")

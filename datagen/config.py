@@ -182,6 +182,34 @@ class SpeedConfig:
             raise ConfigError(f"factors: a speed appears twice ({list(self.factors)})")
 
 
+SCENE_FILE_SUFFIXES = (".blend", ".glb", ".gltf", ".fbx", ".obj", ".usd", ".usda", ".usdc", ".usdz", ".abc")
+
+
+@dataclass(frozen=True)
+class SourceConfig:
+    """Where the scene comes from: built in code (blender_scenes/<name>.py; `file` empty) or a file
+    made elsewhere (.blend, or glTF / FBX / OBJ / USD / Alembic imported headless). A file's own
+    animation, frames frame_start .. frame_end at `fps` (read from the file when not given), is the
+    clip: it spans the normalised time [0, 1], played in duration_s seconds (the file's own length
+    unless the scene YAML or the preset sets duration_s). rig `auto` places the camera rig from the
+    animated bounding box (around it for kind object, inside it for kind room); `config` keeps camera:
+    as written."""
+    file: str = ""
+    frame_start: float | None = None
+    frame_end: float | None = None
+    fps: float | None = None
+    rig: Literal["auto", "config"] = "auto"
+
+    def __post_init__(self):
+        if self.file and not self.file.lower().endswith(SCENE_FILE_SUFFIXES):
+            raise ConfigError(f"file: {self.file!r} is not a format Blender imports headless here "
+                              f"(expected {', '.join(SCENE_FILE_SUFFIXES)})")
+        if self.fps is not None and not self.fps > 0:
+            raise ConfigError(f"fps: expected a positive frame rate, got {self.fps!r}")
+        if self.frame_start is not None and self.frame_end is not None and not self.frame_end > self.frame_start:
+            raise ConfigError(f"frame_end: expected a frame after frame_start ({self.frame_start}), got {self.frame_end}")
+
+
 @dataclass(frozen=True)
 class SceneConfig:
     name: str
@@ -198,6 +226,7 @@ class SceneConfig:
     sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
     speed: float = 1.0     # this folder's time compression: the clip lasts duration_s / speed real seconds
     speeds: SpeedConfig = field(default_factory=SpeedConfig)   # speed variants written beside the scene
+    source: SourceConfig = field(default_factory=SourceConfig)   # built in code, or a file's scene
 
     def __post_init__(self):
         check_positive(self, "duration_s")

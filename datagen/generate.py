@@ -48,7 +48,17 @@ FORMAT_VERSION = 1
 
 
 def config_fingerprint(cfg: SceneConfig) -> str:
-    return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{dump_config(cfg)}".encode()).hexdigest()
+    """What a finished scene folder was made with. A scene built in code leaves `source` out, so
+    folders generated before scenes could come from files keep their fingerprint."""
+    import yaml
+
+    from common.config import to_dict
+
+    data = to_dict(cfg)
+    if not cfg.source.file:
+        data.pop("source")
+    text = yaml.safe_dump(data, sort_keys=False)
+    return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{text}".encode()).hexdigest()
 
 
 def timestamps_us(cfg: SceneConfig) -> np.ndarray:
@@ -398,9 +408,38 @@ class SceneJob:
             write_text_atomic(self.dir / "blur" / level / "exposures.json", json.dumps(exposures, indent=1))
 
 
+def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
+    """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
+    scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
+    import re
+
+    from common.config import read_yaml_mapping, to_dict
+    from datagen.config import deep_merge
+    from datagen.scene_file import resolve_file_scene
+
+    if args.scene_file:
+        name = re.sub(r"[^A-Za-z0-9_-]", "_", args.scene_file.stem) or "scene"
+        data = deep_merge({"name": name, "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
+                          preset.overrides)
+    else:
+        yaml_path = Path(args.scene_config) if args.scene_config else None
+        raw = read_yaml_mapping(yaml_path) if yaml_path else {}
+        data = deep_merge(raw, preset.scene(cfg.name))
+        f = Path(cfg.source.file)
+        data["source"] = {**data.get("source", {}), "file": str(f if f.is_absolute() or yaml_path is None
+                                                                 else (yaml_path.parent / f).resolve())}
+        if "duration_s" not in raw and "duration_s" not in preset.scene(cfg.name):
+            data.pop("duration_s", None)
+    return resolve_file_scene(data)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scene", required=True, help="scene name (blender_scenes/<name>.yaml)")
+    ap.add_argument("--scene", default=None, help="scene name (blender_scenes/<name>.yaml)")
+    ap.add_argument("--scene-file", type=Path, default=None,
+                    help="a scene made elsewhere (.blend, .glb/.gltf, .fbx, .obj, .usd*, .abc); its stem names it")
+    ap.add_argument("--kind", choices=("object", "room"), default="object",
+                    help="with --scene-file: cameras around the content (object) or inside it (room)")
     ap.add_argument("--preset", default="quick", help="dataset preset (configs/dataset_<preset>.yaml) or a YAML path")
     ap.add_argument("--scene-config", type=Path, help="use this scene YAML instead of the scene's own")
     ap.add_argument("--out", type=Path, required=True, help="dataset root; the scene goes to OUT/<scene>")
@@ -408,9 +447,13 @@ def main(argv=None) -> int:
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--position", type=int, default=0, help="progress-bar line (when several scenes run side by side)")
     args = ap.parse_args(argv)
+    if bool(args.scene) == bool(args.scene_file):
+        ap.error("give --scene NAME or --scene-file FILE")
     try:
         preset = load_preset(args.preset)
-        cfg = resolve_scene(args.scene, preset.scene(args.scene), args.scene_config)
+        cfg = resolve_scene(args.scene, preset.scene(args.scene), args.scene_config) if args.scene else None
+        if args.scene_file or cfg.source.file:
+            cfg = file_scene_config(args, preset, cfg)
         job = SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position)
         with output_lock(job.dir):       # two generators of one scene folder would corrupt each other
             job.run()

@@ -18,7 +18,7 @@ import numpy as np
 
 from datagen.cameras import FLIP_YZ, Intrinsics
 from datagen.config import SceneConfig
-from blender_scenes.common import ANIM_FRAMES, frame_of
+from blender_scenes.common import ANIM_FRAMES
 from common.imageio import read_exr
 
 ENGINE_IDS = {"workbench": "BLENDER_WORKBENCH", "cycles": "CYCLES", "eevee": "BLENDER_EEVEE"}
@@ -30,8 +30,12 @@ def reset_scene() -> bpy.types.Scene:
 
 
 def setup_render(cfg: SceneConfig) -> None:
+    """The engine, image and colour settings every scene renders with (a file's scene keeps its own
+    frame range and rate, and for path-traced engines its own world and lights; without lights it
+    gets the toolkit's sun)."""
     sc = bpy.context.scene
     r = cfg.render
+    from_file = bool(cfg.source.file)
     if r.engine == "cycles":
         import addon_utils
 
@@ -40,8 +44,9 @@ def setup_render(cfg: SceneConfig) -> None:
     sc.render.resolution_x, sc.render.resolution_y = r.width, r.height
     sc.render.resolution_percentage = 100
     sc.render.pixel_aspect_x = sc.render.pixel_aspect_y = 1.0
-    sc.render.fps = 30
-    sc.frame_start, sc.frame_end = 1, 1 + ANIM_FRAMES
+    if not from_file:
+        sc.render.fps = 30
+        sc.frame_start, sc.frame_end = 1, 1 + ANIM_FRAMES
     sc.render.use_motion_blur = False
     sc.render.image_settings.file_format = "OPEN_EXR"
     sc.render.image_settings.color_depth = "32"
@@ -51,9 +56,16 @@ def setup_render(cfg: SceneConfig) -> None:
     sc.view_settings.look = "None"
     sc.view_settings.exposure = 0.0
     sc.view_settings.gamma = 1.0
+    keep_world = from_file and r.engine != "workbench" and sc.world is not None
     world = sc.world or bpy.data.worlds.new("World")
     sc.world = world
-    world.color = cfg.lighting.background
+    if not keep_world:
+        world.use_nodes = False
+        world.color = cfg.lighting.background
+    if from_file and r.engine != "workbench" and not any(o.type == "LIGHT" for o in sc.objects):
+        from blender_scenes.common import sun_and_world
+
+        sun_and_world(direction=cfg.lighting.light_direction)
     if r.engine == "workbench":
         lt = cfg.lighting
         sc.display.render_aa = {1: "OFF"}.get(r.samples, str(r.samples))
@@ -106,8 +118,13 @@ def set_noise_seed(seed: int) -> None:
         sc.cycles.seed = int(seed) % (2**31 - 1)
 
 
+# Blender frame of normalised time 0, and frames per unit of normalised time: the built-in scenes'
+# keyframes span 1 .. 1 + ANIM_FRAMES; a file's scene spans its own range (set by build_scene)
+_TIME_MAP = [1.0, float(ANIM_FRAMES)]
+
+
 def set_time(tau: float) -> None:
-    f = frame_of(tau)
+    f = _TIME_MAP[0] + _TIME_MAP[1] * tau
     bpy.context.scene.frame_set(int(math.floor(f)), subframe=f - math.floor(f))
 
 
@@ -158,6 +175,14 @@ def build_scene(cfg: SceneConfig, intr: Intrinsics) -> list:
 
     from blender_scenes.common import consolidate
 
+    if cfg.source.file:                  # a file's scene: its own objects, animation and materials
+        from datagen.scene_file import load_file
+
+        load_file(cfg.source.file)
+        _TIME_MAP[:] = [float(cfg.source.frame_start), float(cfg.source.frame_end - cfg.source.frame_start)]
+        setup_render(cfg)
+        return make_cameras(cfg.camera.n_cameras, intr)
+    _TIME_MAP[:] = [1.0, float(ANIM_FRAMES)]
     reset_scene()
     setup_render(cfg)
     importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)

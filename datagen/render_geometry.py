@@ -60,7 +60,8 @@ class GeometrySampler:
     triangles, carried by its world vertices at every time (blur_geometry.PartMotion)."""
 
     def __init__(self):
-        self.objects = [o for o in bpy.context.scene.objects if o.type == "MESH" and len(o.data.polygons)]
+        self.objects = [o for o in bpy.context.scene.objects
+                        if o.type == "MESH" and len(o.data.polygons) and not o.hide_render]
         self.deforming: dict[int, np.ndarray] = {}     # part -> its fan triangles [F, 3]
 
     def matrices(self) -> np.ndarray:

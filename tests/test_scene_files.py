@@ -1,0 +1,150 @@
+"""Scenes from a user's file: a built-in scene saved to .blend and generated from the file gives the
+same frames and events; the worked examples (an armature-rigged figure, a glTF asset) generate; bad
+files are refused with one line naming the file, leaving nothing behind."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+TINY_PRESET = """scenes: [cubes]
+overrides:
+  duration_s: 0.01
+  render: {width: 64, height: 48, samples: 5}
+  camera: {n_cameras: 2}
+  frames: {keep_every: 3, test_every: 2}
+"""
+
+
+def _run(args, cwd=ROOT):
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=cwd)
+
+
+def _bpy(script: str, tmp_path: Path) -> None:
+    p = tmp_path / "make.py"
+    p.write_text(script)
+    r = _run([str(p)], cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+SAVE_BUILTIN = """
+from pathlib import Path
+import bpy
+from datagen import render as R
+from datagen.cameras import intrinsics_from_fov
+from datagen.config import resolve_scene
+cfg = resolve_scene("blur_plane", scene_file=Path(r"{root}") / "blender_scenes" / "blur_plane.yaml")
+R.build_scene(cfg, intrinsics_from_fov(64, 48, 50.0))
+for o in [o for o in bpy.data.objects if o.type == "CAMERA"]:
+    bpy.data.objects.remove(o)
+bpy.ops.wm.save_as_mainfile(filepath="board.blend")
+"""
+
+
+def test_a_builtin_scene_saved_to_blend_generates_the_same_frames_and_events(tmp_path):
+    import h5py
+    import yaml
+
+    _bpy(SAVE_BUILTIN.format(root=ROOT), tmp_path)
+    builtin = yaml.safe_load((ROOT / "blender_scenes" / "blur_plane.yaml").read_text())
+    from_file = {**builtin, "name": "board", "source": {"file": "board.blend", "rig": "config"}}
+    (tmp_path / "board.yaml").write_text(yaml.safe_dump(from_file))
+    preset = tmp_path / "p.yaml"
+    preset.write_text("scenes: [blur_plane]\n")
+    r1 = _run(["-m", "datagen.generate", "--scene", "blur_plane", "--scene-config",
+               str(ROOT / "blender_scenes" / "blur_plane.yaml"), "--preset", str(preset), "--out", str(tmp_path / "a"),
+               "--no-progress"])
+    r2 = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(tmp_path / "board.yaml"), "--preset", str(preset),
+               "--out", str(tmp_path / "b")])
+    assert r1.returncode == 0 and r2.returncode == 0, r1.stderr[-1500:] + r2.stderr[-1500:]
+    a, b = tmp_path / "a" / "blur_plane", tmp_path / "b" / "board"
+    pngs = sorted(p.relative_to(a) for p in (a / "rgb").rglob("*.png"))
+    assert pngs and all((a / p).read_bytes() == (b / p).read_bytes() for p in pngs)
+    with h5py.File(a / "events" / "cam0.h5") as fa, h5py.File(b / "events" / "cam0.h5") as fb:
+        assert len(fa["events/t"]) > 100
+        for k in ("t", "x", "y", "p"):
+            np.testing.assert_array_equal(fa[f"events/{k}"][:], fb[f"events/{k}"][:])
+    ma, mb = (json.loads((d / "manifest.json").read_text())["blur"]["levels"] for d in (a, b))
+    assert ma == mb
+
+
+def test_the_worked_examples_generate(tmp_path):
+    """examples/scenes/make_scenes.py: the armature-rigged walker (its skin deforms) and the glTF spinner."""
+    r = _run([str(ROOT / "examples" / "scenes" / "make_scenes.py"), str(tmp_path / "files")])
+    assert r.returncode == 0, r.stderr[-1500:]
+    preset = tmp_path / "p.yaml"
+    preset.write_text(TINY_PRESET)
+    walker = tmp_path / "walker.yaml"
+    walker.write_text("name: walker\nkind: object\nsource: {file: files/walker.blend}\n"
+                      "blur: {target_px: {mild: 0.8, strong: 1.5}, max_exposure_ms: 4.0, sample_stride_px: 2}\n")
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(walker), "--preset", str(preset),
+              "--out", str(tmp_path / "data")])
+    assert r.returncode == 0, r.stderr[-2000:]
+    m = json.loads((tmp_path / "data" / "walker" / "manifest.json").read_text())
+    assert set(m["blur"]["levels"]) == {"mild", "strong"} and m["counts"]["timestamps"] == 31
+    assert all(abs(lv["median_px"] / lv["target_px"] - 1) < 0.15 for lv in m["blur"]["levels"].values())
+    fractions = [v["dynamic_fraction"] for v in json.loads((tmp_path / "data" / "walker" / "dynamic" / "masks.json")
+                                                           .read_text())["views"]]
+    assert min(fractions) > 0.002                   # the figure moves in every view; the ground does not
+    cfg = (tmp_path / "data" / "walker" / "scene.yaml").read_text()
+    assert "frame_end: 49.0" in cfg and "fps: 24.0" in cfg
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "files" / "spinner.glb"), "--preset",
+              str(preset), "--out", str(tmp_path / "data")])
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "data" / "spinner" / "manifest.json").exists()
+
+
+STATIC = """
+import bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+{body}
+bpy.ops.wm.save_as_mainfile(filepath="{name}.blend")
+"""
+CUBE = "bpy.ops.mesh.primitive_cube_add(size=1.0)\n"
+
+
+@pytest.mark.parametrize("kind", ["missing", "not-blender", "corrupt-blend", "corrupt-glb", "unsupported", "no-mesh",
+                                  "no-animation", "empty-range", "out-of-view"])
+def test_bad_scene_files_are_refused_in_one_line_leaving_nothing(tmp_path, kind):
+    preset = tmp_path / "p.yaml"
+    preset.write_text(TINY_PRESET)
+    extra = []
+    if kind == "missing":
+        f, words = tmp_path / "nowhere.blend", "no such file"
+    elif kind == "not-blender":
+        f, words = tmp_path / "notes.blend", "not a Blender file"
+        f.write_text("hello")
+    elif kind == "corrupt-blend":
+        f, words = tmp_path / "broken.blend", "Blender cannot read it"
+        f.write_bytes(b"BLENDER-v500" + b"\x00" * 64)
+    elif kind == "corrupt-glb":
+        f, words = tmp_path / "broken.glb", "Blender cannot read it"
+        f.write_bytes(b"glTF\x02\x00\x00\x00garbage")
+    elif kind == "unsupported":
+        f, words = tmp_path / "mesh.ply", "is not a format Blender imports headless"
+        f.write_text("ply\n")
+    elif kind == "no-mesh":
+        _bpy(STATIC.format(body="", name="empty"), tmp_path)
+        f, words = tmp_path / "empty.blend", "no mesh to render"
+    elif kind == "no-animation":
+        _bpy(STATIC.format(body=CUBE, name="still"), tmp_path)
+        f, words = tmp_path / "still.blend", "nothing moves in frames 1 .. 250"
+    elif kind == "empty-range":
+        _bpy(STATIC.format(body=CUBE + "bpy.context.scene.frame_end = 1\n", name="flat"), tmp_path)
+        f, words = tmp_path / "flat.blend", "empty frame range (1 .. 1)"
+    else:                                   # the rig's cameras look away from the moving cube
+        body = CUBE + ("o = bpy.context.active_object\no.keyframe_insert('location', frame=1)\n"
+                       "o.location.x = 1.0\no.keyframe_insert('location', frame=20)\n")
+        _bpy(STATIC.format(body=body, name="away"), tmp_path)
+        cfg = tmp_path / "away.yaml"
+        cfg.write_text("name: away\nkind: object\nsource: {file: away.blend, rig: config}\n"
+                       "camera: {radius: 4.0, height: 1.0, target: [50.0, 50.0, 0.0]}\n")
+        f, words, extra = tmp_path / "away.blend", "keeps only 0 % of the moving content in view", ["--scene-config", str(cfg)]
+    args = ["-m", "e4dgs.cli", "dataset", "--preset", str(preset), "--out", str(tmp_path / "data")]
+    r = _run(args + (extra or ["--scene-file", str(f)]))
+    lines = [ln for ln in r.stderr.strip().splitlines() if ln.startswith("error")]
+    assert r.returncode != 0 and len(lines) == 1 and words in lines[0] and f.name in lines[0], r.stderr[-1500:]
+    assert not (tmp_path / "data").exists() or not any((tmp_path / "data").iterdir())
