@@ -69,10 +69,11 @@ class GeometrySampler:
         dg = bpy.context.evaluated_depsgraph_get()
         return np.array([np.array(o.evaluated_get(dg).matrix_world) for o in self.objects], np.float64)
 
-    def _meshes(self, fan: bool = False):
-        """(local vertices [V, 3], triangles [F, 3], polygon sizes [P]) of every part at the current time."""
+    def _meshes(self, fan: bool = False, only=None):
+        """(local vertices [V, 3], triangles [F, 3], polygon sizes [P]) of every part (or of the parts
+        `only`) at the current time."""
         dg = bpy.context.evaluated_depsgraph_get()
-        for o in self.objects:
+        for o in (self.objects if only is None else [self.objects[i] for i in only]):
             ev = o.evaluated_get(dg)
             me = ev.to_mesh()
             co = np.empty(len(me.vertices) * 3)
@@ -121,10 +122,9 @@ class GeometrySampler:
         for i, t in enumerate(tau):
             R.set_time(float(t))
             mats[i] = self.matrices()
-            if self.deforming:
-                for o, (co, _, _) in enumerate(self._meshes()):
-                    if o in verts:
-                        verts[o].append(co @ mats[i, o, :3, :3].T + mats[i, o, :3, 3])
+            order = sorted(self.deforming)
+            for o, (co, _, _) in zip(order, self._meshes(only=order)):      # the deforming parts only
+                verts[o].append(co @ mats[i, o, :3, :3].T + mats[i, o, :3, 3])
         for o in self.deforming:                     # the vertices carry the motion: identity matrices
             mats[:, o] = np.eye(4)
         return PartMotion(mats, {o: (self.deforming[o], np.stack(v)) for o, v in verts.items()})
