@@ -22,7 +22,11 @@ def add_masks(scene_dir: Path) -> list[Path]:
     returns the folders written."""
     ds = SceneDataset(scene_dir)
     cfg = ds.config
-    job = SceneJob(cfg, scene_dir.parent, ds.manifest.get("preset", "custom"), progress=False, folder=scene_dir.name)
+    import numpy as np
+
+    poses = np.stack([c.c2w for c in ds.cameras]) if cfg.source.cameras else None     # as filmed
+    job = SceneJob(cfg, scene_dir.parent, ds.manifest.get("preset", "custom"), progress=False, folder=scene_dir.name,
+                   poses=poses)
     R.build_scene(cfg, job.intr)
     job.measure_dynamic()
     written = []

@@ -193,12 +193,14 @@ class SourceConfig:
     clip: it spans the normalised time [0, 1], played in duration_s seconds (the file's own length
     unless the scene YAML or the preset sets duration_s). rig `auto` places the camera rig from the
     animated bounding box (around it for kind object, inside it for kind room); `config` keeps camera:
-    as written."""
+    as written. `cameras` names camera objects of the file to film with instead of the rig."""
     file: str = ""
     frame_start: float | None = None
     frame_end: float | None = None
     fps: float | None = None
     rig: Literal["auto", "config"] = "auto"
+    # camera objects of the file to use instead of the rig (their animated poses and their common lens)
+    cameras: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.file and not self.file.lower().endswith(SCENE_FILE_SUFFIXES):

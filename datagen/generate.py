@@ -74,7 +74,8 @@ class SceneJob:
     """State of one scene's generation; `run()` does the work (resuming if a checkpoint matches)."""
 
     def __init__(self, cfg: SceneConfig, out_root: Path, preset: str = "custom", checkpoint_every: int = 100,
-                 progress: bool = True, position: int = 0, folder: str | None = None, tau: np.ndarray | None = None):
+                 progress: bool = True, position: int = 0, folder: str | None = None, tau: np.ndarray | None = None,
+                 poses: np.ndarray | None = None):
         self.cfg, self.preset, self.progress, self.position = cfg, preset, progress, position
         self.dir = Path(out_root) / (folder or cfg.name)
         if int(checkpoint_every) < 1:
@@ -85,10 +86,11 @@ class SceneJob:
             tau = self.t_us / self.t_us[-1] if self.t_us[-1] > 0 else np.zeros(len(self.t_us))
         self.tau = tau
         check_speeds(cfg.name, cfg.speeds.factors, cfg.speeds.exposure_ms, cfg.render.fps, cfg.n_timestamps)
+        # [C, T, 4, 4] OpenCV c2w: the rig's, or given (a file's own cameras, read from it by the caller)
+        self.poses = scene_poses(cfg, self.tau) if poses is None else poses
         self.variants = [SceneJob(variant_config(cfg, s), out_root, preset, checkpoint_every, False, position,
-                                  variant_name(cfg.name, s), tau) for s in cfg.speeds.factors]
+                                  variant_name(cfg.name, s), tau, self.poses) for s in cfg.speeds.factors]
         self.intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
-        self.poses = scene_poses(cfg, self.tau)  # [C, T, 4, 4] OpenCV c2w
         self.kept = np.arange(0, cfg.n_timestamps, cfg.frames.keep_every)
         self._kept_index = {int(i): j for j, i in enumerate(self.kept)}   # timestamp -> kept frame number
         self.blur: BlurReport | None = None   # exposures chosen from the scene geometry (run() measures them)
@@ -408,31 +410,6 @@ class SceneJob:
             write_text_atomic(self.dir / "blur" / level / "exposures.json", json.dumps(exposures, indent=1))
 
 
-def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
-    """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
-    scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
-    import re
-
-    from common.config import read_yaml_mapping, to_dict
-    from datagen.config import deep_merge
-    from datagen.scene_file import resolve_file_scene
-
-    if args.scene_file:
-        name = re.sub(r"[^A-Za-z0-9_-]", "_", args.scene_file.stem) or "scene"
-        data = deep_merge({"name": name, "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
-                          preset.overrides)
-    else:
-        yaml_path = Path(args.scene_config) if args.scene_config else None
-        raw = read_yaml_mapping(yaml_path) if yaml_path else {}
-        data = deep_merge(raw, preset.scene(cfg.name))
-        f = Path(cfg.source.file)
-        data["source"] = {**data.get("source", {}), "file": str(f if f.is_absolute() or yaml_path is None
-                                                                 else (yaml_path.parent / f).resolve())}
-        if "duration_s" not in raw and "duration_s" not in preset.scene(cfg.name):
-            data.pop("duration_s", None)
-    return resolve_file_scene(data)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default=None, help="scene name (blender_scenes/<name>.yaml)")
@@ -453,8 +430,17 @@ def main(argv=None) -> int:
         preset = load_preset(args.preset)
         cfg = resolve_scene(args.scene, preset.scene(args.scene), args.scene_config) if args.scene else None
         if args.scene_file or cfg.source.file:
+            from datagen.scene_file import file_scene_config
+
             cfg = file_scene_config(args, preset, cfg)
-        job = SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position)
+        poses = None
+        if cfg.source.cameras:                 # the file (loaded by file_scene_config) films with its own cameras
+            from datagen.scene_file import file_camera_poses
+
+            t_us = timestamps_us(cfg)
+            poses = file_camera_poses(cfg, t_us / t_us[-1])
+        job = SceneJob(cfg, args.out, str(args.preset), args.checkpoint_every, not args.no_progress, args.position,
+                       poses=poses)
         with output_lock(job.dir):       # two generators of one scene folder would corrupt each other
             job.run()
     except ConfigError as exc:

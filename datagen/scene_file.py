@@ -156,12 +156,53 @@ def place_rig(kind: str, lo: np.ndarray, hi: np.ndarray, camera: dict, width: in
             "radius_change": camera.get("radius_change", 0.0) * radius / old_radius}
 
 
+def file_camera_fov(path: Path, names: tuple[str, ...]) -> float:
+    """The horizontal field of view (degrees) the named cameras share; SceneFileError naming a camera
+    that is missing, not a camera, off-centre, or has another lens."""
+    sc = bpy.context.scene
+    have = sorted(o.name for o in sc.objects if o.type == "CAMERA")
+    fovs = []
+    for n in names:
+        o = sc.objects.get(n)
+        if o is None or o.type != "CAMERA":
+            raise SceneFileError(f"{path}: source.cameras: no camera object {n!r} (the file's cameras: "
+                                 f"{', '.join(have) or 'none'})")
+        d = o.data
+        if d.type != "PERSP" or d.shift_x or d.shift_y or d.sensor_fit == "VERTICAL":
+            raise SceneFileError(f"{path}: source.cameras: {n!r} must be a perspective camera without lens shift, "
+                                 "fitting its sensor horizontally")
+        fovs.append(math.degrees(2 * math.atan(d.sensor_width / (2 * d.lens))))
+    if max(fovs) - min(fovs) > 1e-6:
+        raise SceneFileError(f"{path}: source.cameras: the cameras' lenses differ ({', '.join(f'{f:.3f}' for f in fovs)} "
+                             "degrees); the dataset has one intrinsic matrix")
+    return fovs[0]
+
+
+def file_camera_poses(cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
+    """OpenCV c2w [C, T, 4, 4] of the file's cameras source.cameras at normalised times tau (the file
+    is loaded; their scale is removed)."""
+    from datagen.cameras import FLIP_YZ
+
+    sc = bpy.context.scene
+    src = cfg.source
+    out = np.empty((len(src.cameras), len(tau), 4, 4))
+    for i, t in enumerate(tau):
+        f = src.frame_start + float(t) * (src.frame_end - src.frame_start)
+        sc.frame_set(int(math.floor(f)), subframe=float(f - math.floor(f)))
+        for k, n in enumerate(src.cameras):
+            m = np.array(sc.objects[n].matrix_world, np.float64)
+            m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=0)
+            out[k, i] = m @ FLIP_YZ
+    return out
+
+
 def in_view(cfg: SceneConfig, moving: list[np.ndarray]) -> list[float]:
     """Per camera the mean share of the moving surface (points probed over the clip) in its image."""
     from datagen.cameras import scene_poses
 
     intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
-    poses = scene_poses(cfg, np.linspace(0, 1, len(moving)))
+    probe_tau = np.linspace(0, 1, len(moving))
+    poses = file_camera_poses(cfg, probe_tau) if cfg.source.cameras else scene_poses(cfg, probe_tau)
     shares = []
     for k in range(cfg.camera.n_cameras):
         s = []
@@ -190,19 +231,47 @@ def resolve_file_scene(data: dict[str, Any], label: str = "") -> SceneConfig:
     extra: dict[str, Any] = {"source": {"frame_start": start, "frame_end": end, "fps": fps}}
     if "duration_s" not in data:
         extra["duration_s"] = (end - start) / fps
-    if src.rig == "auto":
+    if src.cameras:
+        extra["camera"] = {**dict(data.get("camera", {})), "n_cameras": len(src.cameras),
+                           "fov_x_deg": file_camera_fov(path, src.cameras), "shake": {"rms_deg": 0.0}}
+    elif src.rig == "auto":
         extra["camera"] = place_rig(cfg0.kind, lo, hi, dict(data.get("camera", {})), cfg0.render.width,
                                     cfg0.render.height)
     cfg = from_dict(SceneConfig, deep_merge(data, extra))
     shares = in_view(cfg, moving)
     worst = int(np.argmin(shares))
-    # an automatic rig must keep most of the moving content in view; a rig the user set, at least some
-    if shares[worst] < (MIN_IN_VIEW if src.rig == "auto" else MIN_IN_VIEW_OWN_RIG):
+    # an automatic rig must keep most of the moving content in view; cameras the user set, at least some
+    own = src.rig == "config" or bool(src.cameras)
+    if shares[worst] < (MIN_IN_VIEW_OWN_RIG if own else MIN_IN_VIEW):
         raise SceneFileError(f"{path}: camera {worst} keeps only {100 * shares[worst]:.0f} % of the moving content in "
-                             f"view (expected >= {100 * (MIN_IN_VIEW if src.rig == 'auto' else MIN_IN_VIEW_OWN_RIG):.0f} %): the scene is too large for the rig "
+                             f"view (expected >= {100 * (MIN_IN_VIEW_OWN_RIG if own else MIN_IN_VIEW):.0f} %): the scene is too large for the rig "
                              f"({'use kind: room' if cfg.kind == 'object' else 'set camera: radius, height, target'}"
                              " or source.rig: config with your own camera values)")
-    print(f"{label or cfg.name}: frames {start:g}..{end:g} at {fps:g} fps -> {cfg.duration_s:g} s clip; rig target "
-          f"{np.round(cfg.camera.target, 3).tolist()}, radius {cfg.camera.radius:.3g}, height {cfg.camera.height:.3g}; "
+    rig = (f"the file's cameras {', '.join(src.cameras)}" if src.cameras else
+           f"rig target {np.round(cfg.camera.target, 3).tolist()}, radius {cfg.camera.radius:.3g}, height {cfg.camera.height:.3g}")
+    print(f"{label or cfg.name}: frames {start:g}..{end:g} at {fps:g} fps -> {cfg.duration_s:g} s clip; {rig}; "
           f"moving content in view {', '.join(f'{100 * s:.0f} %' for s in shares)}", flush=True)
     return cfg
+
+
+def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
+    """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
+    scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
+    import re
+
+    from common.config import read_yaml_mapping
+
+    if args.scene_file:
+        name = re.sub(r"[^A-Za-z0-9_-]", "_", args.scene_file.stem) or "scene"
+        data = deep_merge({"name": name, "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
+                          preset.overrides)
+    else:
+        yaml_path = Path(args.scene_config) if args.scene_config else None
+        raw = read_yaml_mapping(yaml_path) if yaml_path else {}
+        data = deep_merge(raw, preset.scene(cfg.name))
+        f = Path(cfg.source.file)
+        data["source"] = {**data.get("source", {}), "file": str(f if f.is_absolute() or yaml_path is None
+                                                                 else (yaml_path.parent / f).resolve())}
+        if "duration_s" not in raw and "duration_s" not in preset.scene(cfg.name):
+            data.pop("duration_s", None)
+    return resolve_file_scene(data)

@@ -148,3 +148,50 @@ def test_bad_scene_files_are_refused_in_one_line_leaving_nothing(tmp_path, kind)
     lines = [ln for ln in r.stderr.strip().splitlines() if ln.startswith("error")]
     assert r.returncode != 0 and len(lines) == 1 and words in lines[0] and f.name in lines[0], r.stderr[-1500:]
     assert not (tmp_path / "data").exists() or not any((tmp_path / "data").iterdir())
+
+
+CAMS = """
+import bpy, math
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_cube_add(size=1.0)
+o = bpy.context.active_object
+o.keyframe_insert('location', frame=1)
+o.location.x = 0.5
+o.keyframe_insert('location', frame=20)
+bpy.context.scene.frame_end = 20
+cam = bpy.data.objects.new("CamA", bpy.data.cameras.new("CamA"))
+bpy.context.scene.collection.objects.link(cam)
+cam.data.lens, cam.data.sensor_width = 30.0, 36.0
+cam.location, cam.rotation_euler = (0.0, -5.0, 0.0), (math.pi / 2, 0.0, 0.0)
+cam.keyframe_insert('location', frame=1)
+cam.location = (1.0, -5.0, 0.0)
+cam.keyframe_insert('location', frame=20)
+bpy.ops.wm.save_as_mainfile(filepath="cams.blend")
+"""
+
+
+def test_the_files_own_cameras_film_it(tmp_path):
+    """source.cameras: the file's animated camera, its lens, its poses in cameras.json (OpenCV axes);
+    a camera name the file lacks is refused naming the file's cameras."""
+    import math
+
+    _bpy(CAMS, tmp_path)
+    preset = tmp_path / "p.yaml"
+    preset.write_text(TINY_PRESET)
+    cfg = tmp_path / "cams.yaml"
+    cfg.write_text("name: cams\nkind: object\nsource: {file: cams.blend, cameras: [CamA]}\n")
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(cfg), "--preset", str(preset),
+              "--out", str(tmp_path / "data")])
+    assert r.returncode == 0, r.stderr[-2000:]
+    cams = json.loads((tmp_path / "data" / "cams" / "cameras.json").read_text())
+    assert len(cams["cameras"]) == 1
+    fx = cams["intrinsics"]["fx"]
+    assert fx == pytest.approx(64 / 2 / math.tan(math.atan(36.0 / 60.0)), rel=1e-9)     # lens 30 mm on 36 mm
+    c2w = np.array(cams["cameras"][0]["c2w_opencv"])
+    np.testing.assert_allclose(c2w[0, :3, 3], [0.0, -5.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(c2w[-1, :3, 3], [1.0, -5.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(c2w[0, :3, 2], [0.0, 1.0, 0.0], atol=1e-6)          # looking along +y at the cube
+    cfg.write_text("name: cams\nkind: object\nsource: {file: cams.blend, cameras: [CamB]}\n")
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(cfg), "--preset", str(preset),
+              "--out", str(tmp_path / "other")])
+    assert r.returncode != 0 and "no camera object 'CamB' (the file's cameras: CamA)" in r.stderr
