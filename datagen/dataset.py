@@ -6,6 +6,7 @@ This is the boundary recon uses (`recon -> datagen.dataset`). Images are returne
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,11 +70,20 @@ class SceneDataset:
             raise DatasetError(f"{path}: missing")
         frames = []
         for f in read_json(path)["frames"]:
-            gray = self.dir / (f["gray_path"] + ".png") if "gray_path" in f else None
+            gray = self._frame_path(path, f["gray_path"]) if "gray_path" in f else None
             exposure = blur.get((f["camera"], f["index"])) if blur else None
             frames.append(FrameRecord(f["camera"], f["index"], int(f["timestamp_us"]), float(f["time"]),
-                                      self.dir / (f["file_path"] + ".png"), gray, exposure))
+                                      self._frame_path(path, f["file_path"]), gray, exposure))
         return frames
+
+    def _frame_path(self, transforms: Path, file_path: str) -> Path:
+        """A frame's PNG: file_path is relative to the transforms file's folder (as D-NeRF style loaders
+        read it); scenes written before blur levels followed that gave it relative to the scene folder."""
+        p = Path(os.path.normpath(transforms.parent / (file_path + ".png")))
+        if p.exists() or transforms.parent == self.dir:
+            return p
+        old = self.dir / (file_path + ".png")
+        return old if old.exists() else p
 
     def frames(self, split: str) -> list[FrameRecord]:
         """Sharp frames of split 'train' or 'test' (every test_every-th kept timestamp per camera)."""

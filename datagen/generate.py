@@ -393,15 +393,24 @@ class SceneJob:
                 entry = self._frame_entry(k, j, f"./rgb/cam{k}/{j:05d}", int(self.t_us[i]))
                 entry["gray_path"] = f"./gray/cam{k}/{j:05d}"
                 split["test" if j % cfg.frames.test_every == 0 else "train"].append(entry)
+        # D-NeRF style loaders read transforms_{train,val,test}.json beside each other and resolve
+        # file_path against that folder: the held-out views are the val split too, and every blur
+        # level's folder is a complete D-NeRF scene (its blurred training frames, the sharp test views)
+        split["val"] = split["test"]
         for name, frames in split.items():
             write_text_atomic(self.dir / f"transforms_{name}.json", json.dumps({**base, "frames": frames}, indent=1))
+        held_out = [{**f, "file_path": "../../" + f["file_path"][2:], "gray_path": "../../" + f["gray_path"][2:]}
+                    for f in split["test"]]
         for level, windows in self.windows.items():
             frames, exposures = [], []
+            for name in ("test", "val"):
+                write_text_atomic(self.dir / "blur" / level / f"transforms_{name}.json",
+                                  json.dumps({**base, "frames": held_out}, indent=1))
             for k in range(cfg.camera.n_cameras):
                 for j, (first, last) in windows.items():
                     t_mid = int(round((self.t_us[first] + self.t_us[last]) / 2))
                     if j % cfg.frames.test_every:
-                        frames.append(self._frame_entry(k, j, f"./blur/{level}/cam{k}/{j:05d}", t_mid))
+                        frames.append(self._frame_entry(k, j, f"./cam{k}/{j:05d}", t_mid))
                     exposures.append({"camera": k, "index": j, "first_frame_us": int(self.t_us[first]),
                                       "last_frame_us": int(self.t_us[last]), "center_us": t_mid,
                                       "n_frames": int(last - first + 1),

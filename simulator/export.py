@@ -42,10 +42,27 @@ def write_e2vid_txt(path: str | os.PathLike, stream: EventStream, chunk: int = 1
         ev = stream.events
         for i in range(0, len(ev), chunk):
             part = ev[i:i + chunk]
-            sec, us = np.divmod(part["t"], 1_000_000)
-            cols = np.column_stack([sec, us, part["x"], part["y"], (part["p"] > 0).astype(np.int64)])
-            np.savetxt(fh, cols, fmt="%d.%06d %d %d %d")
+            fh.write("".join(f"{seconds_text(int(t))} {x} {y} {int(p > 0)}\n"
+                             for t, x, y, p in zip(part["t"].tolist(), part["x"].tolist(), part["y"].tolist(),
+                                                   part["p"].tolist())))
     return path
+
+
+def seconds_text(t_us: int) -> str:
+    """Microseconds as exact decimal seconds, the sign written apart: -1939 -> '-0.001939'
+    (divmod would floor it to -1.998061)."""
+    sec, us = divmod(abs(t_us), 1_000_000)
+    return f"{'-' if t_us < 0 else ''}{sec}.{us:06d}"
+
+
+def parse_seconds(text: str) -> int:
+    """Exact inverse of seconds_text for any decimal seconds text ('-0.001939', '2', '1.5')."""
+    neg = text.startswith("-")
+    whole, _, frac = text.lstrip("+-").partition(".")
+    if not (whole or frac) or not (whole or "0").isdigit() or (frac and not frac.isdigit()) or len(frac) > 6:
+        raise ValueError(f"{text!r} is not a time in seconds with at most microsecond digits")
+    us = int(whole or "0") * 1_000_000 + int(frac.ljust(6, "0") or "0")
+    return -us if neg else us
 
 
 def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
@@ -58,8 +75,10 @@ def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
         data = np.loadtxt(fh, dtype=str, ndmin=2)
     if data.size == 0:
         return EventStream(make_events([], [], [], []), width, height)
-    sec_us = np.char.partition(data[:, 0], ".")
-    t = sec_us[:, 0].astype(np.int64) * 1_000_000 + np.char.ljust(sec_us[:, 2], 6, "0").astype(np.int64)
+    try:
+        t = np.array([parse_seconds(v) for v in data[:, 0].tolist()], np.int64)
+    except ValueError as exc:
+        raise ValueError(f"{path}: time column: {exc}") from None
     p = np.where(data[:, 3].astype(np.int64) > 0, 1, -1).astype(np.int8)
     stream = EventStream(make_events(t, data[:, 1].astype(np.uint16), data[:, 2].astype(np.uint16), p), width, height)
     validate_events(stream.events, width, height)

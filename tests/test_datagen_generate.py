@@ -332,3 +332,99 @@ def test_a_deforming_mesh_is_refused_by_the_blur_measurement(tmp_path):
     assert r.returncode == 2, r.stderr
     assert "scene deforming: part 'board' deforms" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def _dnerf_style_load(basedir: str):
+    """A loader written the way D-NeRF's load_blender_data and nerfstudio's D-NeRF parser are: the three
+    split files beside each other, file_path + '.png' joined to the JSON's own folder, time per frame,
+    camera_angle_x for the focal length."""
+    import os
+
+    import imageio.v2 as imageio
+
+    out = {}
+    for s in ("train", "val", "test"):
+        with open(os.path.join(basedir, f"transforms_{s}.json")) as fp:
+            meta = json.load(fp)
+        imgs = [imageio.imread(os.path.join(basedir, frame["file_path"] + ".png")) for frame in meta["frames"]]
+        poses = np.array([frame["transform_matrix"] for frame in meta["frames"]], np.float32)
+        times = np.array([frame["time"] for frame in meta["frames"]], np.float32)
+        focal = 0.5 * imgs[0].shape[1] / np.tan(0.5 * float(meta["camera_angle_x"]))
+        out[s] = (np.stack(imgs), poses, times, focal)
+    return out
+
+
+def test_every_transforms_file_loads_with_a_dnerf_style_loader(tiny):
+    """The scene folder and every blur level's folder are D-NeRF scenes as they are: the blurred
+    training frames with the sharp held-out views, paths relative to each JSON's folder."""
+    from datagen.dataset import SceneDataset
+
+    root = _dnerf_style_load(str(tiny))
+    ds = SceneDataset(tiny)
+    assert len(root["train"][0]) == len(ds.frames("train")) and len(root["test"][0]) == len(ds.frames("test"))
+    assert np.array_equal(root["val"][1], root["test"][1]) and root["test"][2][0] == 0.0
+    for level in ds.blur_levels():
+        blur = _dnerf_style_load(str(tiny / "blur" / level))
+        assert len(blur["train"][0]) == len(ds.blurred_frames(level)) > 0
+        np.testing.assert_array_equal(blur["test"][0], root["test"][0])          # the sharp held-out views
+        assert blur["train"][3] == pytest.approx(root["train"][3])
+        first = ds.blurred_frames(level)[0]
+        assert first.path == tiny / "blur" / level / f"cam{first.camera}" / f"{first.index:05d}.png"
+
+
+def test_scenes_written_before_paths_were_relative_to_their_json_still_read(tiny, tmp_path):
+    """Older scenes gave blur levels' file_path relative to the scene folder: still read right."""
+    import shutil
+
+    from datagen.dataset import SceneDataset
+
+    scene = tmp_path / tiny.name
+    shutil.copytree(tiny, scene)
+    level = SceneDataset(scene).blur_levels()[0]
+    tf = scene / "blur" / level / "transforms_train.json"
+    meta = json.loads(tf.read_text())
+    for f in meta["frames"]:
+        f["file_path"] = f"./blur/{level}/" + f["file_path"][2:]
+    tf.write_text(json.dumps(meta))
+    recs = SceneDataset(scene).blurred_frames(level)
+    assert recs and all(r.path.exists() and r.path.parent.parent.name == level for r in recs)
+
+
+def _d3dgs_camera(frame: dict, fovx: float, width: int, height: int, patched: bool):
+    """A world-to-pixel map the way D3DGS's readCamerasFromTransforms builds its camera (older 3DGS
+    code: T = -inv(M)[:3, 3], FovX / FovY swapped), or with the two-line patch docs/dataset.md gives."""
+    matrix = np.linalg.inv(np.array(frame["transform_matrix"]))
+    R = -np.transpose(matrix[:3, :3])
+    R[:, 0] = -R[:, 0]
+    T = -matrix[:3, 3]
+    if patched:
+        T[0] = -T[0]                                   # patch line 1
+    focal = width / (2 * np.tan(fovx / 2))
+    fovy = 2 * np.arctan(height / (2 * focal))
+    FovY, FovX = (fovy, fovx) if patched else (fovx, fovy)     # patch line 2 (upstream: FovY = fovx; FovX = fovy)
+    w2c = np.eye(4)
+    w2c[:3, :3], w2c[:3, 3] = R.T, T                   # getWorld2View2
+    fx, fy = width / (2 * np.tan(FovX / 2)), height / (2 * np.tan(FovY / 2))
+
+    def project(p):
+        c = w2c[:3, :3] @ p + w2c[:3, 3]
+        return np.array([fx * c[0] / c[2] + width / 2, fy * c[1] / c[2] + height / 2]) - 0.5   # ndc2Pix
+    return project
+
+
+def test_d3dgs_reader_misplaces_our_cameras_and_the_documented_patch_fixes_it(tiny):
+    from datagen.cameras import project
+    from datagen.dataset import SceneDataset
+
+    ds = SceneDataset(tiny)
+    meta = json.loads((tiny / "transforms_train.json").read_text())
+    w, h = ds.intrinsics.width, ds.intrinsics.height
+    worst = {False: 0.0, True: 0.0}
+    for frame in meta["frames"]:
+        c2w = ds.pose(frame["camera"], frame["timestamp_us"])
+        point = c2w[:3, 3] + 3.0 * c2w[:3, 2] + 0.4 * c2w[:3, 0] + 0.3 * c2w[:3, 1]    # in view, off-centre
+        truth = project(ds.intrinsics.K, c2w, point[None])[0][0] - 0.5                # 3DGS: pixel centres at integers
+        for patched in (False, True):
+            got = _d3dgs_camera(frame, meta["camera_angle_x"], w, h, patched)(point)
+            worst[patched] = max(worst[patched], float(np.abs(got - truth).max()))
+    assert worst[True] < 1e-6 and worst[False] > 2.0

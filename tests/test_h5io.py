@@ -136,3 +136,23 @@ def test_the_same_events_give_the_same_bytes(tmp_path, rng):
             d = f[name]
             assert (d.compression, d.compression_opts, d.shuffle, d.fillvalue) == ("gzip", 1, True, 0), name
             assert d.id.get_create_plist().get_fill_time() == h5py.h5d.FILL_TIME_ALLOC, name
+
+
+def test_e2vid_text_writes_negative_times_as_computed_by_hand(tmp_path):
+    """The sign is written apart from the digits: -1939 us is -0.001939 s (divmod would give -1.998061),
+    and our reader reads a correct negative time back (it used to read -0.001939 as +1939 us)."""
+    from simulator.events import EventStream, make_events
+    from simulator.export import parse_seconds, seconds_text
+
+    t = [-2_000_000, -1_000_001, -1939, -5, 0, 5, 1_000_000]
+    s = EventStream(make_events(t, [0, 1, 2, 3, 0, 1, 2], [0] * 7, [1, -1, 1, -1, 1, -1, 1]), 4, 2)
+    lines = write_e2vid_txt(tmp_path / "neg.txt", s).read_text().splitlines()
+    assert [ln.split()[0] for ln in lines[1:]] == ["-2.000000", "-1.000001", "-0.001939", "-0.000005", "0.000000",
+                                                  "0.000005", "1.000000"]
+    assert read_e2vid_txt(tmp_path / "neg.txt").events["t"].tolist() == t
+    assert [parse_seconds(v) for v in ("-0.001939", "2", "1.5", "+0.25", ".5")] == [-1939, 2_000_000, 1_500_000,
+                                                                                 250_000, 500_000]
+    assert seconds_text(-1) == "-0.000001"
+    for bad in ("1.0000001", "abc", "-", "1e-3"):
+        with pytest.raises(ValueError):
+            parse_seconds(bad)
