@@ -92,6 +92,18 @@ def limit_threads(n: int) -> None:
     numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
 
 
+def die_with_parent() -> None:
+    """preexec_fn of a worker process: the kernel kills it when its parent dies, even by SIGKILL
+    (Linux prctl PR_SET_PDEATHSIG), so a killed `e4dgs dataset` leaves no orphan rendering on."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG = 1
+    except OSError:                        # not Linux: nothing to arrange
+        pass
+
+
 def child_env() -> dict[str, str]:
     """The environment for a task's child process: numba's pool sized like OMP_NUM_THREADS."""
     env = dict(os.environ)

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
+from common.taskpool import die_with_parent
 from datagen.config import load_preset
 
 
@@ -41,7 +42,7 @@ def generate_scene_task(preset: str | Path, scene: str, out: Path, checkpoint_ev
     from common.taskpool import child_env
 
     proc = subprocess.run(_worker_cmd(preset, scene, out, checkpoint_every) + ["--no-progress"],
-                          stdout=sys.stdout, stderr=sys.stderr, env=child_env())
+                          stdout=sys.stdout, stderr=sys.stderr, env=child_env(), preexec_fn=die_with_parent)
     if proc.returncode != 0:
         raise RuntimeError(f"scene {scene}: worker exited with status {proc.returncode}")
     return scene
@@ -90,7 +91,7 @@ def generate_dataset(preset: str | Path, scenes: list[str] | None, out: Path, jo
         while pending and len(running) < jobs:
             scene = pending.pop(0)
             cmd = _worker_cmd(preset, scene, out, checkpoint_every) + ["--position", str(len(running))]
-            running.append((scene, subprocess.Popen(cmd)))
+            running.append((scene, subprocess.Popen(cmd, preexec_fn=die_with_parent)))
         for scene, proc in list(running):
             if proc.poll() is not None:
                 running.remove((scene, proc))

@@ -33,7 +33,7 @@ def run_one_scene(args: argparse.Namespace) -> int:
     import subprocess
 
     from common.config import read_yaml_mapping
-    from common.taskpool import child_env
+    from common.taskpool import child_env, die_with_parent
 
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
     cmd = [sys.executable, "-m", "datagen.generate", "--preset", str(args.preset), "--out", str(out),
@@ -45,7 +45,7 @@ def run_one_scene(args: argparse.Namespace) -> int:
         cmd += ["--scene", name, "--scene-config", str(args.scene_config)]
     if args.scene_file:
         cmd += ["--scene-file", str(args.scene_file), "--kind", args.kind]
-    r = subprocess.run(cmd, env=child_env())
+    r = subprocess.run(cmd, env=child_env(), preexec_fn=die_with_parent)
     return 1 if r.returncode else 0
 
 
@@ -86,7 +86,7 @@ def run_masks(args: argparse.Namespace) -> int:
     import json
     import subprocess
 
-    from common.taskpool import child_env
+    from common.taskpool import child_env, die_with_parent
     from datagen.verify import scene_dirs
 
     scenes = scene_dirs(args.path)
@@ -99,7 +99,8 @@ def run_masks(args: argparse.Namespace) -> int:
         if (d / "dynamic" / "masks.json").exists() and not args.force:
             print(f"{d}: has masks, skipped")
             continue
-        r = subprocess.run([sys.executable, "-m", "datagen.add_masks", str(d)], env=child_env())
+        r = subprocess.run([sys.executable, "-m", "datagen.add_masks", str(d)], env=child_env(),
+                           preexec_fn=die_with_parent)
         if r.returncode != 0:
             raise SystemExit(f"error: {d}: computing the dynamic masks failed (status {r.returncode})")
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import warnings
 
@@ -53,10 +54,28 @@ def describe_failure(exc: BaseException) -> str:
     return f"internal error ({type(exc).__name__}: {exc}); run again with --debug for the traceback"
 
 
+TIME_OPTIONS = ("--t0", "--t1")      # values that may be negative times with units (-5ms)
+
+
+def join_negative_values(argv: list[str]) -> list[str]:
+    """`--t0 -5ms` as `--t0=-5ms`: argparse takes a value starting with '-' for an option unless it is
+    a plain number, so a negative time with a unit would be refused."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] in TIME_OPTIONS and i + 1 < len(argv) and re.match(r"-\d|-\.\d", argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("E4DGS_DEBUG") == "1"
-    argv = [a for a in argv if a != "--debug"]
+    argv = join_negative_values([a for a in argv if a != "--debug"])
     args = build_parser().parse_args(argv)
     try:
         with warnings.catch_warnings():   # warnings as one line each; the toolkit's own every time

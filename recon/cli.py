@@ -86,7 +86,10 @@ def camera_from_json(path: Path):
             raise SystemExit(f"error: --camera {path}: {key}: expected a positive integer, got {data.get(key)!r}")
     if abs(np.linalg.det(fields["c2w_opencv"][:3, :3])) < 1e-9:
         raise SystemExit(f"error: --camera {path}: c2w_opencv: its rotation part is singular")
-    return camera_from_pose(fields["K"], fields["c2w_opencv"], data["width"], data["height"])
+    try:
+        return camera_from_pose(fields["K"], fields["c2w_opencv"], data["width"], data["height"])
+    except ValueError as exc:
+        raise SystemExit(f"error: --camera {path}: {exc}") from None
 
 
 def render_test_views(model, scene_dir: Path, out: Path, fmt: str = "png") -> int:
@@ -124,6 +127,12 @@ def run_render(args: argparse.Namespace) -> int:
         return 0
     if args.camera is None or not args.t:
         raise SystemExit("error: give --camera and --t, or --test-views SCENE")
+    if args.camera.lstrip("-").isdigit() and args.camera.startswith("-"):
+        raise SystemExit(f"error: --camera {args.camera}: a camera index is >= 0 (or give a JSON camera file)")
+    names = [f"{t:.6f}" for t in args.t]
+    if len(set(names)) != len(names):
+        raise SystemExit("error: --t: two times give the same file name (times are written to 6 decimals); "
+                         "give distinct times")
     camera = int(args.camera) if args.camera.isdigit() else camera_from_json(Path(args.camera))
     for t in args.t:
         try:
@@ -132,6 +141,6 @@ def run_render(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: {exc}") from None
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img
         name = f"cam{args.camera}" if isinstance(camera, int) else Path(args.camera).stem
-        path = write_png(args.out / f"{name}_t{t:.4f}.png", (img * 255 + 0.5).astype(np.uint8))
+        path = write_png(args.out / f"{name}_t{t:.6f}.png", (img * 255 + 0.5).astype(np.uint8))
         print(f"render: {path}")
     return 0

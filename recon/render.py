@@ -11,9 +11,30 @@ from recon.gaussians import GaussianModel
 from recon.raster import Camera, RenderOutput, render
 
 
+def check_camera(K, c2w_opencv, width, height) -> tuple[np.ndarray, np.ndarray]:
+    """(K [3, 3], c2w [4, 4]) as float64 arrays; ValueError saying what was expected otherwise."""
+    try:
+        K = np.asarray(K, np.float64)
+        c2w = np.asarray(c2w_opencv, np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("camera: expected K as a 3x3 array of numbers and c2w as a 4x4 array of numbers") from None
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise ValueError(f"camera: K must be a finite 3x3 matrix with positive fx, fy; got shape {K.shape}"
+                         + (f", fx={K[0, 0]:g}, fy={K[1, 1]:g}" if K.shape == (3, 3) else ""))
+    if c2w.shape != (4, 4) or not np.all(np.isfinite(c2w)):
+        raise ValueError(f"camera: the pose must be a finite 4x4 camera-to-world matrix, got shape {c2w.shape}"
+                         + (" with NaN or inf" if c2w.shape == (4, 4) else ""))
+    if abs(np.linalg.det(c2w[:3, :3])) < 1e-9:
+        raise ValueError("camera: the pose's rotation part is singular")
+    if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer)) and width > 0 and height > 0):
+        raise ValueError(f"camera: width and height must be positive integers, got {width!r} x {height!r}")
+    return K, c2w
+
+
 def camera_from_pose(K, c2w_opencv, width: int, height: int, dtype=torch.float32, device="cpu") -> Camera:
-    """Raster camera from intrinsics K [3,3] and an OpenCV camera-to-world pose [4,4]."""
-    c2w = np.asarray(c2w_opencv, np.float64)
+    """Raster camera from intrinsics K [3,3] and an OpenCV camera-to-world pose [4,4] (ValueError saying
+    what was expected for anything else)."""
+    K, c2w = check_camera(K, c2w_opencv, width, height)
     return Camera(torch.as_tensor(np.asarray(K, np.float64), dtype=dtype, device=device),
                   torch.as_tensor(np.linalg.inv(c2w), dtype=dtype, device=device), int(width), int(height))
 

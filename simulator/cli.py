@@ -13,7 +13,14 @@ IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 def list_frames(folder: Path) -> list[Path]:
     if not folder.is_dir():
         raise SystemExit(f"error: --frames {folder}: not a directory")
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    # hidden files (macOS ._ resource forks, editors' backups) are not frames
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith("."))
+    by_stem: dict[str, Path] = {}
+    for f in files:
+        if f.stem in by_stem:
+            raise SystemExit(f"error: --frames {folder}: {by_stem[f.stem].name} and {f.name} are the same frame in two "
+                             "formats; keep one")
+        by_stem[f.stem] = f
     if len(files) < 2:
         raise SystemExit(f"error: --frames {folder}: need at least two images ({', '.join(sorted(IMAGE_SUFFIXES))}), found {len(files)}")
     return files
@@ -64,13 +71,24 @@ def add_simulate_parser(sub) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--fps", type=positive_float, help="frame rate; frame k is at t0 + round(k * 1e6 / fps) us")
     src.add_argument("--timestamps", type=Path, help="file with one microsecond timestamp per frame")
-    p.add_argument("--t0", type=int, default=0, help="time of the first frame with --fps, in us (default 0)")
+    p.add_argument("--t0", default="0", help="time of the first frame with --fps: us, or with a unit (10ms, -5ms, "
+                                             "0.5s); may be negative (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
     p.add_argument("--config", type=Path, help="simulator config YAML (default: noise-free, C = 0.2)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
     p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
                    help="save a resumable checkpoint every N frames (default 500)")
     p.set_defaults(func=run_simulate)
+
+
+def check_output(out: Path, frames: Path) -> None:
+    """--out must be an HDF5 file name outside the frames folder, not a folder (before anything is written)."""
+    if out.suffix.lower() not in (".h5", ".hdf5"):
+        raise SystemExit(f"error: --out {out}: expected an event file name ending in .h5 (it is written as HDF5)")
+    if out.is_dir():
+        raise SystemExit(f"error: --out {out}: is a folder; expected an event file name ending in .h5")
+    if out.resolve().parent == frames.resolve():
+        raise SystemExit(f"error: --out {out}: inside the --frames folder; write the events elsewhere")
 
 
 def run_simulate(args: argparse.Namespace) -> int:
@@ -82,12 +100,19 @@ def run_simulate(args: argparse.Namespace) -> int:
         config = load_config(SimulatorConfig, args.config) if args.config else SimulatorConfig()
     except ConfigError as exc:
         raise SystemExit(f"error: {exc}") from None
+    check_output(args.out, args.frames)
     files = list_frames(args.frames)
     if args.timestamps:
         t_us = read_timestamps(args.timestamps, len(files))
     else:
         check_no_gaps(files)
-        t_us = [args.t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
+        from simulator.view import parse_time_us
+
+        try:
+            t0 = parse_time_us(args.t0)
+        except ValueError as exc:
+            raise SystemExit(f"error: --t0: {exc}") from None
+        t_us = [t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
     try:
         r = simulate_files(files, t_us, args.out, config, args.seed, args.checkpoint_every)
     except ValueError as exc:    # a bad frame: one line naming it

@@ -33,6 +33,9 @@ class FrameError(ValueError):
     """A frame or its timestamp cannot be simulated (shape, values, time order)."""
 
 
+MAX_PIXELS = 4096 * 4096       # the per-pixel state of ~30 arrays stays within a few GB
+
+
 class EventSimulator:
     """Per-pixel state of one DVS sensor; see module docstring for the model."""
 
@@ -40,8 +43,12 @@ class EventSimulator:
                  backend: str = "fast", threads: int | None = None):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {sorted(BACKENDS)}, got {backend!r}")
-        if width <= 0 or height <= 0:
-            raise ValueError(f"sensor size must be positive, got {width}x{height}")
+        if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in (width, height)) \
+                or width <= 0 or height <= 0:
+            raise ValueError(f"sensor size must be positive integers, got {width!r} x {height!r}")
+        if int(width) * int(height) > MAX_PIXELS:
+            raise ValueError(f"sensor size {width} x {height} = {int(width) * int(height):,} pixels: more than "
+                             f"{MAX_PIXELS:,} (4096 x 4096); the per-pixel state would not fit in memory")
         self.config, self.width, self.height, self.seed = config, int(width), int(height), int(seed)
         self._emit = BACKENDS[backend]
         # threads: work chunks of the fast kernel (default: numba's thread count; 1 for small sensors,

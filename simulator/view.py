@@ -14,11 +14,12 @@ ON_RGB = np.array([220, 40, 40], np.float64)    # red
 OFF_RGB = np.array([40, 80, 220], np.float64)   # blue (mirror of ON, so a tie is neutral)
 BACKGROUND_RGB = np.array([255, 255, 255], np.float64)
 
-_TIME_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(us|ms|s)?\s*$")
+_TIME_RE = re.compile(r"^\s*([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(us|ms|s)?\s*$")
 
 
 def parse_time_us(text: str) -> int:
-    """'1500', '1500us', '1.5ms', '0.0015s' -> 1500 (integer microseconds)."""
+    """'1500', '1500us', '1.5ms', '0.0015s' -> 1500; '-5ms' -> -5000 (integer microseconds; event files
+    may start before 0)."""
     m = _TIME_RE.match(str(text))
     if not m:
         raise ValueError(f"cannot read time {text!r}: expected a number with optional unit us, ms or s")

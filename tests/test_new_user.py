@@ -1,0 +1,155 @@
+"""What a new user's trial found (issue 36), each case failing on the code before its fix: duplicate
+YAML keys, outputs of the wrong kind or inside an input, hidden and doubled frames, negative start
+times with units, colliding render names, impossible cameras and sensors, and workers that outlive
+a killed `e4dgs dataset`."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.imageio import write_exr
+from e4dgs.cli import main
+from tests.test_cli import grating_frames
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def cli(argv: list[str], capsys) -> tuple[int, str]:
+    """(exit status, stderr and any SystemExit message) of `e4dgs argv` run in this process."""
+    try:
+        rc, msg = main([str(a) for a in argv]), ""
+    except SystemExit as exc:
+        rc, msg = (exc.code if isinstance(exc.code, int) else 1), (exc.code if isinstance(exc.code, str) else "")
+    err = msg + capsys.readouterr().err
+    assert "Traceback" not in err
+    return rc, err
+
+
+@pytest.mark.parametrize("where,text", [
+    ("bench", "dataset: quick\nscenes: [hinge]\ndataset: paper\n"),
+    ("dataset", "scenes: [cubes]\noverrides: {duration_s: 0.1}\noverrides: {duration_s: 0.2}\n"),
+    ("sim", "pos_threshold: 0.2\nneg_threshold: 0.3\npos_threshold: 0.4\n"),
+])
+def test_a_key_written_twice_in_any_yaml_is_refused_naming_it(tmp_path, capsys, where, text):
+    from benchmark.config import load_bench
+    from common.config import ConfigError, load_config
+    from datagen.config import load_preset
+    from simulator.config import SimulatorConfig
+
+    p = tmp_path / f"{where}.yaml"
+    p.write_text(text)
+    load = {"bench": load_bench, "dataset": load_preset, "sim": lambda q: load_config(SimulatorConfig, q)}[where]
+    with pytest.raises(ConfigError, match="appears twice"):
+        load(p)
+
+
+@pytest.fixture
+def frames(tmp_path) -> Path:
+    d = tmp_path / "frames"
+    for k, f in enumerate(grating_frames()):
+        write_exr(d / f"frame_{k:03d}.exr", f)
+    return d
+
+
+def test_simulate_refuses_outputs_of_the_wrong_kind_or_inside_its_input(frames, tmp_path, capsys):
+    for out, words in ((tmp_path / "wrong.png", "expected an event file name ending in .h5"),
+                       (frames / "events.h5", "inside the --frames folder")):
+        rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", out], capsys)
+        assert rc == 1 and words in err and not out.exists()
+    (tmp_path / "adir.h5").mkdir()
+    rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "adir.h5"], capsys)
+    assert rc == 1 and "is a folder" in err
+
+
+def test_simulate_skips_hidden_files_refuses_doubled_frames_and_takes_negative_start_times(frames, tmp_path, capsys):
+    from simulator.h5io import read_events
+
+    (frames / "._frame_000.exr").write_bytes(b"\x00\x05\x16\x07 resource fork")      # a macOS copy's debris
+    out = tmp_path / "ev.h5"
+    assert cli(["simulate", "--frames", frames, "--fps", "1000", "--t0", "-5ms", "--out", out], capsys)[0] == 0
+    ev = read_events(out)
+    assert ev.events["t"].min() >= -5000 and ev.events["t"].min() < 0
+    import cv2
+    cv2.imwrite(str(frames / "frame_003.png"), np.zeros((24, 32), np.uint8))
+    rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "b.h5"], capsys)
+    assert rc == 1 and "frame_003.exr and frame_003.png are the same frame in two formats" in err
+
+
+def test_render_refuses_colliding_names_negative_indices_and_impossible_cameras(tmp_path, capsys, motion_scene):
+    import json
+
+    from recon.render import camera_from_pose
+
+    model = tmp_path / "m"
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "train", "--scene", str(motion_scene), "--method", "d3dgs",
+                        "--set", "train.iterations=3", "--set", "train.scale_schedule=false", "--set",
+                        "train.densify.enabled=false", "--set", "train.init.n_points_object=50", "--out", str(model),
+                        "--no-progress"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-1500:]
+    rc, err = cli(["render", "--model", model, "--camera", "0", "--t", "0.5", "0.5000001", "--out", tmp_path / "r"],
+                  capsys)
+    assert rc == 1 and "two times give the same file name" in err and not (tmp_path / "r").exists()
+    rc, err = cli(["render", "--model", model, "--camera=-1", "--t", "0.5", "--out", tmp_path / "r"], capsys)
+    assert rc == 1 and "a camera index is >= 0" in err
+    cam = tmp_path / "cam.json"
+    cam.write_text(json.dumps({"K": [[0, 0, 32], [0, 40, 24], [0, 0, 1]], "c2w_opencv": np.eye(4).tolist(),
+                               "width": 64, "height": 48}))
+    rc, err = cli(["render", "--model", model, "--camera", cam, "--t", "0.5", "--out", tmp_path / "r"], capsys)
+    assert rc == 1 and str(cam) in err and "positive fx, fy" in err
+    bad_pose = np.eye(4)
+    bad_pose[0, 3] = np.nan
+    for K, pose, words in ((np.eye(4), np.eye(4), "K must be a finite 3x3"), (np.eye(3), bad_pose, "NaN or inf"),
+                           (np.eye(3), np.eye(3), "4x4 camera-to-world"), (np.eye(3), np.zeros((4, 4)), "singular")):
+        with pytest.raises(ValueError, match=words):
+            camera_from_pose(K, pose, 64, 48)
+
+
+def test_a_sensor_of_a_fractional_or_impossible_size_is_refused():
+    from simulator import SimulatorConfig
+    from simulator.simulator import EventSimulator
+
+    with pytest.raises(ValueError, match="positive integers, got 32.5"):
+        EventSimulator(SimulatorConfig(), 32.5, 24)
+    with pytest.raises(ValueError, match="more than 16,777,216"):
+        EventSimulator(SimulatorConfig(), 65535, 65535)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(d.name))
+            except (OSError, ValueError, IndexError):
+                pass
+    return out
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs Linux /proc")
+def test_a_killed_dataset_command_takes_its_workers_with_it(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "dataset", "--preset", "tiny", "--out",
+                             str(tmp_path / "d")], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    workers: list[int] = []
+    while time.time() < deadline and not workers:
+        workers = _children(proc.pid)
+        time.sleep(0.05)
+    assert workers, "no worker started"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.time() + 10
+    while time.time() < deadline and any(Path(f"/proc/{w}").exists() and "Z" not in
+                                         Path(f"/proc/{w}/stat").read_text().rsplit(")", 1)[1].split()[0]
+                                         for w in workers if Path(f"/proc/{w}").exists()):
+        time.sleep(0.1)
+    alive = [w for w in workers if Path(f"/proc/{w}").exists()
+             and "Z" not in Path(f"/proc/{w}/stat").read_text().rsplit(")", 1)[1].split()[0]]
+    assert not alive, f"worker(s) {alive} outlived the killed `e4dgs dataset`"
