@@ -130,6 +130,9 @@ def add_view_parser(sub) -> None:
     p.add_argument("--window", default="10ms", help="video: events shown per frame (default 10ms)")
     p.add_argument("--step", default=None, help="video: time between frames (default: the window)")
     p.add_argument("--fps", type=positive_float, default=30.0, help="video frame rate (default 30)")
+    p.add_argument("--scale", type=positive_int, default=None,
+                   help="enlarge each pixel this many times (default: enough for ~640 px wide, small sensors grow)")
+    p.add_argument("--plain", action="store_true", help="no time label or colour key under the image")
     p.set_defaults(func=run_view)
 
 
@@ -137,11 +140,18 @@ def run_view(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from simulator.event_file import EventFile
     from simulator.h5io import EventFileError
-    from simulator.view import event_frame, parse_time_us, save_video
+    from simulator.view import annotate, event_frame, parse_time_us, save_video
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)
-        start, end = ev.t_offset_us, ev.t_end_us + 1
+        # the stream's own end, also when the file records none (its attribute would fall back to the start)
+        last = int(ev.times(ev.n - 1, ev.n)[0]) if ev.n else ev.t_offset_us
+        start, end = ev.t_offset_us, max(ev.t_end_us, last) + 1
+        scale = args.scale or max(1, 640 // ev.width)
+
+        def draw(stream, a: int, b: int):
+            frame = event_frame(stream)
+            return frame if args.plain else annotate(frame, a, b, scale)
         t0 = parse_time_us(args.t0) if args.t0 is not None else start
         t1 = parse_time_us(args.t1) if args.t1 is not None else end
         if t1 <= t0:
@@ -149,7 +159,7 @@ def run_view(args: argparse.Namespace) -> int:
         suffix = args.out.suffix.lower()
         if suffix == ".png":
             stream = ev.window(t0, t1)
-            write_png(args.out, event_frame(stream))
+            write_png(args.out, draw(stream, t0, t1))
             print(f"{args.out}: {len(stream)} events in [{t0}, {t1}) us")
         elif suffix == ".mp4":
             window = parse_time_us(args.window)
@@ -159,10 +169,10 @@ def run_view(args: argparse.Namespace) -> int:
             starts = range(t0, max(t0 + 1, t1 - window + 1), step)
             from tqdm import tqdm
 
-            frames = [event_frame(ev.window(s, s + window))
+            frames = [draw(ev.window(s, s + window), s, s + window)
                       for s in tqdm(starts, desc="view", unit="frame")]
             save_video(args.out, frames, fps=args.fps)
-            print(f"{args.out}: {len(frames)} frames of {window} us every {step} us")
+            print(f"{args.out}: {len(frames)} frames of {window} us every {step} us ({save_video.codec})")
         else:
             raise SystemExit(f"error: --out {args.out}: expected a .png or .mp4 file name")
     except (EventFileError, ValueError) as exc:

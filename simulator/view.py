@@ -45,24 +45,62 @@ def event_frame(stream: EventStream, saturate_count: int = 3) -> np.ndarray:
     return np.round(img).astype(np.uint8)
 
 
-def save_video(path: str | os.PathLike, frames: list[np.ndarray] | np.ndarray, fps: float = 30.0) -> Path:
-    """Write RGB uint8 frames to an MP4 (mp4v) file atomically."""
+def annotate(frame: np.ndarray, t0_us: int, t1_us: int, scale: int = 1) -> np.ndarray:
+    """The event frame scaled up `scale` times (nearest), over a strip with its time window and the
+    colour key (ON red, OFF blue)."""
     import cv2
 
+    img = np.repeat(np.repeat(frame, scale, 0), scale, 1) if scale > 1 else frame
+    h, w = img.shape[:2]
+    strip = np.full((18, w, 3), 255, np.uint8)
+    text = f"{t0_us / 1000:.3f}-{t1_us / 1000:.3f} ms"
+    cv2.putText(strip, text, (3, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
+    for k, (label, rgb) in enumerate((("ON", ON_RGB), ("OFF", OFF_RGB))):
+        x = w - 70 + 36 * k
+        if x > 0:
+            strip[5:13, x:x + 8] = rgb.astype(np.uint8)
+            cv2.putText(strip, label, (x + 10, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.33, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.concatenate([img, strip], 0)
+
+
+def save_video(path: str | os.PathLike, frames: list[np.ndarray] | np.ndarray, fps: float = 30.0) -> Path:
+    """Write RGB uint8 frames to an MP4 file atomically: H.264 (yuv420p, which browsers play) through the
+    ffmpeg of imageio-ffmpeg, or MPEG-4 Part 2 (mp4v) through OpenCV when that ffmpeg is missing.
+    `save_video.codec` says which."""
     path = Path(path)
     if len(frames) == 0:
         raise ValueError(f"{path}: no frames to write")
     h, w = frames[0].shape[:2]
     with atomic_output(path) as tmp:
-        # cv2 picks the container from the extension, so the temporary name keeps it.
+        # the writers pick the container from the extension, so the temporary name keeps it
         tmp_mp4 = tmp.with_name(tmp.name + path.suffix)
-        writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-        if not writer.isOpened():
-            raise RuntimeError(f"{path}: OpenCV cannot open an MP4 writer")
         try:
+            import imageio_ffmpeg
+        except ImportError:
+            imageio_ffmpeg = None
+        if imageio_ffmpeg is not None:
+            ph, pw = h + h % 2, w + w % 2                 # yuv420p needs even sides: pad with white
+            writer = imageio_ffmpeg.write_frames(str(tmp_mp4), (pw, ph), fps=fps, codec="libx264",
+                                                 pix_fmt_out="yuv420p", macro_block_size=1, quality=8,
+                                                 ffmpeg_log_level="error")
+            writer.send(None)
             for f in frames:
-                writer.write(np.ascontiguousarray(f[..., ::-1]))
-        finally:
-            writer.release()
+                out = np.full((ph, pw, 3), 255, np.uint8)
+                out[:h, :w] = f
+                writer.send(np.ascontiguousarray(out))
+            writer.close()
+            save_video.codec = "h264"
+        else:
+            import cv2
+
+            writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+            if not writer.isOpened():
+                raise RuntimeError(f"{path}: OpenCV cannot open an MP4 writer")
+            try:
+                for f in frames:
+                    writer.write(np.ascontiguousarray(f[..., ::-1]))
+            finally:
+                writer.release()
+            save_video.codec = "mp4v"
         os.replace(tmp_mp4, tmp)
     return path

@@ -153,3 +153,22 @@ def test_a_killed_dataset_command_takes_its_workers_with_it(tmp_path):
     alive = [w for w in workers if Path(f"/proc/{w}").exists()
              and "Z" not in Path(f"/proc/{w}/stat").read_text().rsplit(")", 1)[1].split()[0]]
     assert not alive, f"worker(s) {alive} outlived the killed `e4dgs dataset`"
+
+
+def test_view_shows_every_event_of_a_file_that_records_no_end(tmp_path, capsys):
+    """Without a t_end_us attribute the default window used to end at the file's start: 1 of 3 events."""
+    import cv2
+    import h5py
+
+    from simulator.events import EventStream, make_events
+    from simulator.h5io import write_events
+
+    path = tmp_path / "three.h5"
+    write_events(path, EventStream(make_events([0, 400, 900], [1, 2, 3], [1, 1, 1], [1, -1, 1]), 8, 4))
+    with h5py.File(path, "r+") as f:
+        for key in [k for k in f.attrs if k == "t_end_us"]:
+            del f.attrs[key]
+    rc, err = cli(["view", path, "--out", tmp_path / "v.png", "--plain"], capsys)
+    assert rc == 0, err
+    img = cv2.imread(str(tmp_path / "v.png"))
+    assert int(np.sum(img.min(axis=-1) < 255)) == 3
