@@ -31,6 +31,9 @@ def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_di
     dataset = SceneDataset(scene_dir)
     cfg = resolve_config(method, config, overrides)
     out = Path(out_dir) if out_dir is not None else Path("runs") / dataset.dir.name / method
+    if out_dir is None and (out / "model.pt").exists():
+        print(f"fit: {out} holds a finished {method} model of this scene: it is returned as it is "
+              "(give out_dir for a new run)")
     return Trainer(get_method(method)(dataset, cfg), out, progress, on_iteration).run()
 
 

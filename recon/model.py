@@ -91,7 +91,8 @@ class DynamicGaussians:
 
     @torch.no_grad()
     def render(self, camera: Camera | int, t: float, backend: str = "auto") -> torch.Tensor:
-        """Image [H, W, C] in [0, 1] of `camera` (a Camera, or a dataset camera index) at time t."""
+        """Image [H, W, C] in [0, 1] of `camera` (a Camera, or a dataset camera index) at time t, as a torch
+        tensor on the model's device (`render_numpy` gives a NumPy array on the CPU)."""
         check_time(t)
         cam = self.camera(camera, t) if isinstance(camera, (int, np.integer)) else camera
         return self.render_output(cam, t, backend).image.clamp(0.0, 1.0)

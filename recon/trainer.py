@@ -95,6 +95,24 @@ def fingerprint(method: str, cfg: Any, dataset: SceneDataset) -> str:
     return h.hexdigest()[:16]
 
 
+def warn_static_schedule(tcfg: TrainConfig, sched) -> None:
+    """A ConfigWarning when the budget ends before the deformation is switched on or before
+    densification starts: the run would train a static (or never densified) model without a word."""
+    import warnings
+
+    from common.config import ConfigWarning
+
+    n = tcfg.iterations
+    if tcfg.deform and sched.warm_up >= n:
+        warnings.warn(ConfigWarning(
+            f"train.iterations = {n} ends before the deformation is switched on (warm-up {sched.warm_up} iterations): "
+            "the model stays static; train longer or lower train.warm_up"), stacklevel=3)
+    if tcfg.densify.enabled and sched.densify_start >= n:
+        warnings.warn(ConfigWarning(
+            f"train.iterations = {n} ends before densification starts (iteration {sched.densify_start}): the "
+            "initial points are never densified"), stacklevel=3)
+
+
 class Trainer:
     def __init__(self, method: Method, out_dir: str | Path, progress: bool = True,
                  on_iteration: Callable[["Trainer", int], None] | None = None):
@@ -103,6 +121,7 @@ class Trainer:
         self.cfg = method.cfg
         self.tcfg: TrainConfig = method.cfg.train
         self.sched = self.tcfg.schedule()
+        warn_static_schedule(self.tcfg, self.sched)
         self.out = Path(out_dir)
         self.progress = progress
         self.on_iteration = on_iteration

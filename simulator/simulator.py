@@ -128,7 +128,8 @@ class EventSimulator:
 
     # -- simulation -------------------------------------------------------------------------
     def push(self, frame: np.ndarray, t_us: int) -> np.ndarray:
-        """Feed the frame at t_us; return the events in (previous frame time, t_us] (EVENT_DTYPE)."""
+        """Feed the frame at t_us; return the events in (previous frame time, t_us] (EVENT_DTYPE). The first
+        frame only sets every pixel's reference level, so its call returns no events."""
         frame, t_us = self._prepare(frame, t_us)
         c = self.config
         log_now = self._log(frame)

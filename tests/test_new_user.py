@@ -172,3 +172,20 @@ def test_view_shows_every_event_of_a_file_that_records_no_end(tmp_path, capsys):
     assert rc == 0, err
     img = cv2.imread(str(tmp_path / "v.png"))
     assert int(np.sum(img.min(axis=-1) < 255)) == 3
+
+
+def test_a_budget_that_ends_before_the_deformation_or_densification_starts_is_said(motion_scene, tmp_path):
+    import warnings
+
+    import recon
+    from common.config import ConfigWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        recon.fit(motion_scene, "d3dgs", overrides={"train.iterations": 5, "train.scale_schedule": False,
+                                                    "train.warm_up": 200, "train.densify.start": 50,
+                                                    "train.init.n_points_object": 50},
+                  out_dir=tmp_path / "r", progress=False)
+    said = [str(w.message) for w in caught if issubclass(w.category, ConfigWarning)]
+    assert any("before the deformation is switched on (warm-up 200" in m for m in said)
+    assert any("before densification starts (iteration 50)" in m for m in said)
