@@ -5,7 +5,8 @@ A method supplies the loss (`Method.step`) and its data; the trainer does the re
 
     out_dir/run.json            method, fingerprint, resolved config, scene
     out_dir/checkpoint.pt       latest resumable state (atomic; removed when training finishes)
-    out_dir/log.jsonl           rows {iteration, wall_s, loss, n_gaussians[, test_psnr]} (wall_s: training
+    out_dir/log.jsonl           rows {iteration, wall_s, loss, n_gaussians[, test_psnr, test_psnr_on: what it
+                                compares: rgb, or gray after the gain/offset fit]} (wall_s: training
                                 time only, evaluation and file writing excluded, summed over resumes)
     out_dir/snapshots/iter_XXXXXX.pt   models at the configured fractions of the budget
     out_dir/model.pt            the finished model
@@ -258,6 +259,15 @@ class Trainer:
             records = [records[i] for i in pick]
         return evaluate_psnr(self.method.eval_pairs(self.model, records, self.backend))
 
+    def psnr_target(self) -> str:
+        """What test_psnr compares, as the log and the progress bar say: colour frames, or (a method that
+        sees no RGB) gray frames after the per-image log gain / offset fit, which lifts even an
+        untrained model well above 0 dB."""
+        gray = self.method.channels() == 1
+        corrected = type(self.method).correction(self.cfg) is not None
+        return ("gray, after gain/offset fit" if corrected else "gray") if gray else (
+            "rgb, after gain/offset fit" if corrected else "rgb")
+
     def _snapshot_iterations(self) -> set[int]:
         return {max(1, int(round(f * self.tcfg.iterations))) for f in self.tcfg.snapshots}
 
@@ -332,6 +342,7 @@ class Trainer:
         if do_eval:
             self.model.meta.iteration = it
             row["test_psnr"] = round(self.evaluate(), 3)
+            row["test_psnr_on"] = self.psnr_target()
             if it in snaps:
                 self.model.save(self.out / "snapshots" / f"iter_{it:06d}.pt")
                 row["snapshot"] = f"snapshots/iter_{it:06d}.pt"
@@ -363,7 +374,7 @@ class Trainer:
             row = self._record(it, loss_value, info, snaps)
             bar.update(1)
             bar.set_postfix(loss=f"{loss_value:.4f}", n=len(self.model),
-                            **({"psnr": row["test_psnr"]} if "test_psnr" in row else {}))
+                            **({f"psnr ({row['test_psnr_on']})": row["test_psnr"]} if "test_psnr" in row else {}))
             if it % self.tcfg.checkpoint_every == 0 and it < self.tcfg.iterations:
                 self._save_checkpoint()
             if self.on_iteration is not None:

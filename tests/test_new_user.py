@@ -189,3 +189,6 @@ def test_a_budget_that_ends_before_the_deformation_or_densification_starts_is_sa
     said = [str(w.message) for w in caught if issubclass(w.category, ConfigWarning)]
     assert any("before the deformation is switched on (warm-up 200" in m for m in said)
     assert any("before densification starts (iteration 50)" in m for m in said)
+    import json
+    evals = [r for r in map(json.loads, (tmp_path / "r" / "log.jsonl").read_text().splitlines()) if "test_psnr" in r]
+    assert evals and all(r["test_psnr_on"] == "rgb" for r in evals)        # what the number compares, in the log
