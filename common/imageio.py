@@ -12,7 +12,8 @@ import numpy as np
 
 from common.fileio import atomic_output
 
-_SINGLE_CHANNEL_NAMES = ("V", "Y", "L", "Z", "A")
+_SINGLE_CHANNEL_NAMES = ("V", "Y", "L")          # luminance; Blender writes single-channel EXRs as V
+_NOT_INTENSITY = ("A", "Z", "DEPTH", "ALPHA")
 
 
 class ImageReadError(ValueError):
@@ -34,9 +35,11 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     for name in _SINGLE_CHANNEL_NAMES:
         if name in upper:
             return upper[name].astype(np.float32)
-    if len(channels) == 1:
+    if len(channels) == 1 and next(iter(upper)) not in _NOT_INTENSITY:
         return next(iter(channels.values())).astype(np.float32)
-    raise ImageReadError(f"{path}: expected channels R,G,B or a single channel (V/Y), found {sorted(channels)}")
+    raise ImageReadError(f"{path}: expected intensity: channels R,G,B or one luminance channel (V, Y or L), found "
+                         f"{', '.join(sorted(channels))}" + (" (alpha and depth are not intensity)"
+                                                            if set(upper) & set(_NOT_INTENSITY) else ""))
 
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, half: bool = False) -> Path:
@@ -74,6 +77,11 @@ def read_png_linear(path: str | os.PathLike) -> np.ndarray:
         v = img.astype(np.float64) / 65535.0
     else:
         raise ImageReadError(f"{path}: expected an 8- or 16-bit image, got {img.dtype}")
+    if v.ndim == 3 and v.shape[2] in (2, 4):             # gray + alpha, BGRA: only opaque frames are frames
+        alpha = v[..., -1]
+        if alpha.min() < 1.0:
+            raise ImageReadError(f"{path}: has transparent pixels (alpha down to {alpha.min():.3g}); expected opaque "
+                                 "frames (flatten them onto a background first)")
     if v.ndim == 3:
         v = v[..., 2::-1] if v.shape[2] >= 3 else v[..., 0]  # BGR(A) -> RGB
     return srgb_to_linear(v).astype(np.float32)

@@ -5,6 +5,7 @@ a killed `e4dgs dataset`."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -192,3 +193,31 @@ def test_a_budget_that_ends_before_the_deformation_or_densification_starts_is_sa
     import json
     evals = [r for r in map(json.loads, (tmp_path / "r" / "log.jsonl").read_text().splitlines()) if "test_psnr" in r]
     assert evals and all(r["test_psnr_on"] == "rgb" for r in evals)        # what the number compares, in the log
+
+
+def test_frames_that_are_not_intensity_are_refused(tmp_path):
+    """Alpha or depth channels were read as intensity, and a fully transparent PNG as white."""
+    import cv2
+    import OpenEXR
+
+    from common.imageio import ImageReadError, read_exr, read_png_linear
+
+    plane = np.full((4, 5), 0.5, np.float32)
+    for names, words in ((("R", "G", "A"), "found A, G, R (alpha and depth are not intensity)"),
+                         (("Z", "A"), "alpha and depth are not intensity"), (("Z",), "found Z")):
+        p = tmp_path / f"{''.join(names)}.exr"
+        with OpenEXR.File({"type": OpenEXR.scanlineimage}, {n: plane for n in names}) as f:
+            f.write(str(p))
+        with pytest.raises(ImageReadError, match=re.escape(words)):
+            read_exr(p)
+    p = tmp_path / "V.exr"
+    with OpenEXR.File({"type": OpenEXR.scanlineimage}, {"V": plane}) as f:
+        f.write(str(p))
+    assert read_exr(p).shape == (4, 5)
+    rgba = np.zeros((4, 5, 4), np.uint8)
+    cv2.imwrite(str(tmp_path / "clear.png"), rgba)
+    with pytest.raises(ImageReadError, match="transparent pixels"):
+        read_png_linear(tmp_path / "clear.png")
+    rgba[..., 3] = 255
+    cv2.imwrite(str(tmp_path / "opaque.png"), rgba)
+    assert read_png_linear(tmp_path / "opaque.png").shape == (4, 5, 3)
