@@ -22,6 +22,9 @@ PRESETS_DIR = ROOT / "configs"
 SCENE_NAMES = ("lego", "rubiks_cube", "mc_toy", "hinge", "cubes", "capsule", "restroom", "garage")
 
 
+MAX_RENDER_PIXELS = 4096 * 4096
+
+
 @dataclass(frozen=True)
 class RenderConfig:
     """engine: workbench (rasteriser, noise-free; default) | cycles | eevee. samples: anti-aliasing
@@ -34,6 +37,9 @@ class RenderConfig:
 
     def __post_init__(self):
         check_positive(self, "samples", "fps", "width", "height")
+        if self.width * self.height > MAX_RENDER_PIXELS:
+            raise ConfigError(f"width, height: {self.width} x {self.height} is more than {MAX_RENDER_PIXELS:,} pixels "
+                              "(4096 x 4096); every camera's frames and simulator state must fit in memory")
         if self.engine == "workbench" and self.samples not in (1, 5, 8, 11, 16, 32):
             raise ConfigError(f"samples: workbench supports 1, 5, 8, 11, 16 or 32 samples, got {self.samples}")
 

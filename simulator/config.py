@@ -9,6 +9,10 @@ from typing import Literal
 from common.config import ConfigError, ConfigWarning
 
 
+MIN_THRESHOLD = 0.01      # smallest contrast threshold (log units) accepted
+MAX_RATE_HZ = 1e5         # largest per-pixel noise / leak event rate accepted
+
+
 @dataclass(frozen=True)
 class SimulatorConfig:
     """DVS pixel model parameters (v2e's model; names carry units).
@@ -53,13 +57,19 @@ class SimulatorConfig:
         need(finite(self.log_eps) and self.log_eps > 0, "log_eps", "a positive number")
         need(finite(self.linlog_threshold_dn) and self.linlog_threshold_dn > 1, "linlog_threshold_dn", "a number > 1")
         need(finite(self.linlog_dn_per_unit) and self.linlog_dn_per_unit > 0, "linlog_dn_per_unit", "a positive number")
-        need(finite(self.threshold_min) and self.threshold_min > 0, "threshold_min", "a positive number")
+        # a contrast threshold C lets a pixel fire up to (log range) / C events per frame: below MIN_THRESHOLD
+        # one bright frame could ask for billions of events and exhaust memory instead of failing clearly
+        need(finite(self.threshold_min) and self.threshold_min >= MIN_THRESHOLD, "threshold_min",
+             f"a number >= {MIN_THRESHOLD} (1 % contrast; real sensors are ~10-50 %)")
         for name in ("pos_threshold", "neg_threshold"):
             need(finite(getattr(self, name)) and getattr(self, name) >= self.threshold_min, name,
                  f"a number >= threshold_min ({self.threshold_min})")
         for name in ("threshold_sigma", "lowpass_cutoff_hz", "leak_rate_hz", "leak_rate_sigma_decades",
                      "shot_noise_rate_hz", "hot_pixel_rate_hz"):
             need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
+        for name in ("shot_noise_rate_hz", "hot_pixel_rate_hz", "leak_rate_hz"):
+            need(getattr(self, name) <= MAX_RATE_HZ, name, f"at most {MAX_RATE_HZ:g} events per second per pixel "
+                 "(the sensor's bandwidth; more would only fill memory)")
         need(isinstance(self.refractory_us, int) and self.refractory_us >= 0, "refractory_us", "a non-negative integer")
         need(finite(self.hot_pixel_fraction) and 0 <= self.hot_pixel_fraction <= 1, "hot_pixel_fraction", "a number in [0, 1]")
         if self.threshold_sigma > 0.5 * min(self.pos_threshold, self.neg_threshold):

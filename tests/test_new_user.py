@@ -221,3 +221,24 @@ def test_frames_that_are_not_intensity_are_refused(tmp_path):
     rgba[..., 3] = 255
     cv2.imwrite(str(tmp_path / "opaque.png"), rgba)
     assert read_png_linear(tmp_path / "opaque.png").shape == (4, 5, 3)
+
+
+@pytest.mark.parametrize("field,value,words", [
+    ("pos_threshold", 1e-6, "pos_threshold: expected a number >= threshold_min"),
+    ("threshold_min", 1e-6, "threshold_min: expected a number >= 0.01"),
+    ("shot_noise_rate_hz", 1e12, "shot_noise_rate_hz: expected at most 100000 events per second per pixel"),
+])
+def test_sensor_values_that_would_exhaust_memory_are_refused_naming_the_field(field, value, words):
+    from common.config import ConfigError
+    from simulator import SimulatorConfig
+
+    with pytest.raises(ConfigError, match=re.escape(words)):
+        SimulatorConfig(**{field: value})
+
+
+def test_a_camera_too_large_to_render_is_refused_naming_the_fields():
+    from common.config import ConfigError
+    from datagen.config import RenderConfig
+
+    with pytest.raises(ConfigError, match="width, height: 100000 x 100000 is more than"):
+        RenderConfig(width=100000, height=100000)
