@@ -53,4 +53,40 @@ def verify_scene(scene_dir: Path, progress: Callable[[str], None] | None = None)
                 read_info(path)
             except EventFileError as exc:
                 problems.append(str(exc))
+    return problems + count_problems(scene_dir, manifest)
+
+
+def count_problems(scene_dir: Path, manifest: dict) -> list[str]:
+    """The manifest's own figures against the files: cameras, rendered timestamps, kept frames and
+    events per camera (an edited manifest is otherwise believed by everything that reads it)."""
+    where = scene_dir / "manifest.json"
+    counts = manifest.get("counts")
+    if not isinstance(counts, dict):
+        return [f"{where}: no 'counts' table"]
+    problems = []
+    n_cams = len(sorted((scene_dir / "events").glob("cam*.h5")))
+    if counts.get("cameras") != n_cams:
+        problems.append(f"{where}: counts.cameras is {counts.get('cameras')!r}, the scene has {n_cams} event files")
+    try:
+        cams = json.loads((scene_dir / "cameras.json").read_text())["cameras"]
+        n_ts = len(cams[0]["timestamps_us"])
+        if counts.get("timestamps") != n_ts:
+            problems.append(f"{where}: counts.timestamps is {counts.get('timestamps')!r}, cameras.json has {n_ts}")
+    except (OSError, ValueError, KeyError, IndexError):
+        problems.append(f"{scene_dir / 'cameras.json'}: not a readable camera file")
+    for k in range(n_cams):
+        kept = len(list((scene_dir / "rgb" / f"cam{k}").glob("*.png")))
+        if counts.get("kept_frames_per_camera") != kept:
+            problems.append(f"{where}: counts.kept_frames_per_camera is {counts.get('kept_frames_per_camera')!r}, "
+                            f"rgb/cam{k} has {kept} frames")
+            break
+    recorded = counts.get("events_per_camera") or []
+    for k in range(n_cams):
+        try:
+            n = int(read_info(scene_dir / "events" / f"cam{k}.h5")["n_events"])
+        except EventFileError:
+            continue                                      # reported above
+        if k >= len(recorded) or recorded[k] != n:
+            problems.append(f"{where}: counts.events_per_camera[{k}] is "
+                            f"{recorded[k] if k < len(recorded) else 'missing'}, events/cam{k}.h5 holds {n}")
     return problems

@@ -242,3 +242,21 @@ def test_a_camera_too_large_to_render_is_refused_naming_the_fields():
 
     with pytest.raises(ConfigError, match="width, height: 100000 x 100000 is more than"):
         RenderConfig(width=100000, height=100000)
+
+
+def test_check_compares_the_manifests_counts_with_the_files(motion_scene, tmp_path, capsys):
+    import json
+    import shutil
+
+    scene = tmp_path / motion_scene.name
+    shutil.copytree(motion_scene, scene)
+    assert cli(["check", scene], capsys)[0] == 0
+    m = json.loads((scene / "manifest.json").read_text())
+    m["counts"]["events_per_camera"][0] += 7
+    m["counts"]["kept_frames_per_camera"] = 1
+    (scene / "manifest.json").write_text(json.dumps(m))
+    capsys.readouterr()
+    assert main(["check", str(scene)]) == 1
+    out = capsys.readouterr().out
+    assert f"counts.events_per_camera[0] is {m['counts']['events_per_camera'][0]}, events/cam0.h5 holds" in out
+    assert "counts.kept_frames_per_camera is 1, rgb/cam0 has" in out
