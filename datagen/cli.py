@@ -66,7 +66,9 @@ def run_dataset(args: argparse.Namespace) -> int:
 
         print("\nblur levels (median blur length over geometry; PSNR of blurred vs sharp frames):\n" + blur_table(out, done))
     if failed:
-        print(f"dataset: failed: {', '.join(failed)} (run again to resume them)", file=sys.stderr)
+        print(f"dataset: failed: {', '.join(failed)} (the error lines above say why; a scene that was killed or "
+              "crashed resumes where it stopped when run again, one refused for its input needs that input fixed)",
+              file=sys.stderr)
         return 1
     return 0
 
