@@ -291,6 +291,15 @@ def blur_table(rows: list[dict], levels=("mild", "medium", "strong"), order: tup
     return md.getvalue()
 
 
+def blur_levels(rows: list[dict], cfg=None) -> tuple[str, ...]:
+    """The blur study's levels: the preset's, else those its rows hold (mild, medium, strong order first)."""
+    if cfg is not None:
+        return tuple(cfg.blur.levels)
+    held = [r["variant"] for r in rows if r["study"] == "blur"]
+    known = [lv for lv in ("mild", "medium", "strong") if lv in held]
+    return tuple(known + [lv for lv in dict.fromkeys(held) if lv not in known]) or ("mild", "medium", "strong")
+
+
 def _mean_spread(values: list[float]) -> tuple[float, float]:
     """(mean, sample standard deviation; 0 for one value)."""
     m = sum(values) / len(values)
@@ -358,7 +367,7 @@ def write_report(rows: list[dict], out_root: Path, header: str = "", cfg=None) -
     written = []
     for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv),
                        ("leaderboard.json", leaderboard_json(rows, order)), ("accuracy_vs_time.md", accuracy_vs_time(rows)),
-                       ("blur.md", blur_table(rows, order=order, reference=roles.reference)),
+                       ("blur.md", blur_table(rows, blur_levels(rows, cfg), order=order, reference=roles.reference)),
                        ("ablation.md", ablation_table(rows)), ("speed.md", speed_tables(rows + failed, roles, order))):
         if text:
             write_text_atomic(out_root / name, text)

@@ -39,13 +39,18 @@ def local_ray():
 
 
 def _grid(scene: Path, long: dict | None = None) -> BenchConfig:
-    """All six cells (a preset must define them); the tests run a subset with `cells=`."""
+    """The six bundled cells with the quick preset's labels; the tests run a subset with `cells=`."""
     cells = {"d3dgs_sharp": CellSpec("d3dgs", overrides={**TINY, "frames": "sharp", **(long or {})}),
              "d3dgs_blur": CellSpec("d3dgs", overrides={**TINY, "frames": "strong"}),
              "deblur_d3dgs": CellSpec("deblur_d3dgs", overrides={**TINY, "frames": "strong"}),
              "e2vid_d3dgs": CellSpec("e2vid_d3dgs", overrides=TINY),
              "e4dgs": CellSpec("e4dgs", overrides=TINY),
              "e4dgs_rgb": CellSpec("e4dgs_rgb", overrides={**TINY, "rgb_frames": "strong"})}
+    from dataclasses import replace
+
+    from bench_cells import LABELS
+
+    cells = {c: replace(spec, label=LABELS[c]) for c, spec in cells.items()}
     return build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [scene.name], "cells": cells,
                                       "ablation": {"scene": scene.name, "switches": {"w/o AES": {"events.aes": False}}},
                                       "lpips_net": "alex"})
@@ -221,7 +226,7 @@ def test_the_commands_take_ray(motion_scene, tmp_path, local_ray, capsys):
     assert (tmp_path / "data" / "cubes" / "manifest.json").exists() and (tmp_path / "data" / "logs" / "cubes.log").exists()
     preset = tmp_path / "grid.yaml"
     preset.write_text(yaml.safe_dump({"dataset": "tiny_motion", "scenes": [motion_scene.name], "lpips_net": "alex",
-                                      "cells": {c: {"method": s.method, "overrides": s.overrides}
+                                      "cells": {c: {"method": s.method, "label": s.label, "overrides": s.overrides}
                                                 for c, s in _grid(motion_scene).cells.items()}}))
     out = tmp_path / "runs"
     assert main(["bench", "--preset", str(preset), "--data", str(motion_scene.parent), "--out", str(out),
