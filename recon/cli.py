@@ -129,9 +129,9 @@ def run_render(args: argparse.Namespace) -> int:
         raise SystemExit("error: give --camera and --t, or --test-views SCENE")
     if args.camera.lstrip("-").isdigit() and args.camera.startswith("-"):
         raise SystemExit(f"error: --camera {args.camera}: a camera index is >= 0 (or give a JSON camera file)")
-    names = [f"{t:.6f}" for t in args.t]
+    names = [f"{t:.4f}" for t in args.t]
     if len(set(names)) != len(names):
-        raise SystemExit("error: --t: two times give the same file name (times are written to 6 decimals); "
+        raise SystemExit("error: --t: two times give the same file name (times are written to 4 decimals); "
                          "give distinct times")
     camera = int(args.camera) if args.camera.isdigit() else camera_from_json(Path(args.camera))
     for t in args.t:
@@ -141,6 +141,6 @@ def run_render(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: {exc}") from None
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img
         name = f"cam{args.camera}" if isinstance(camera, int) else Path(args.camera).stem
-        path = write_png(args.out / f"{name}_t{t:.6f}.png", (img * 255 + 0.5).astype(np.uint8))
+        path = write_png(args.out / f"{name}_t{t:.4f}.png", (img * 255 + 0.5).astype(np.uint8))
         print(f"render: {path}")
     return 0

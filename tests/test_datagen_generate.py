@@ -326,14 +326,6 @@ def test_dataset_command_prints_the_blur_levels_it_measured(tmp_path):
         assert f"{level['psnr_vs_sharp_db']['median_db']:.1f}" in row
 
 
-def test_a_deforming_mesh_is_refused_by_the_blur_measurement(tmp_path):
-    r = generate(tmp_path / "out", scene="deforming", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
-                 extra=["--scene-config", str(ROOT / "blender_scenes" / "deforming.yaml")])
-    assert r.returncode == 2, r.stderr
-    assert "scene deforming: part 'board' deforms" in r.stderr and "Traceback" not in r.stderr
-    assert not (tmp_path / "out").exists()
-
-
 def _dnerf_style_load(basedir: str):
     """A loader written the way D-NeRF's load_blender_data and nerfstudio's D-NeRF parser are: the three
     split files beside each other, file_path + '.png' joined to the JSON's own folder, time per frame,
