@@ -30,9 +30,10 @@ from common.provenance import git_commit as _git_commit
 from datagen import render as R
 from datagen.blur import BlurStack
 from datagen.blur_geometry import BlurReport, measure_blur_many
-from datagen.cameras import intrinsics_from_fov, interpolate_pose, opencv_to_blender, scene_poses
+from datagen.cameras import intrinsics_from_fov, scene_poses
 from datagen.config import SceneConfig, load_preset, resolve_scene
 from datagen.preview import blur_psnr, contact_sheet, speed_sheet
+from datagen.transforms import write_transforms
 from datagen.speed import SHUTTER_LEVEL, check_interpolation, check_speeds, variant_config, variant_name
 from common.checkpoint import JobCheckpoint
 from common.config import ConfigError, dump_config
@@ -376,47 +377,9 @@ class SceneJob:
             out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in self.variants}
         return out
 
-    def _frame_entry(self, k: int, j: int, path: str, t_us: int) -> dict:
-        c2w = interpolate_pose(self.t_us, self.poses[k], t_us)
-        return {"file_path": path, "transform_matrix": opencv_to_blender(c2w).tolist(),
-                "time": float(t_us / self.t_us[-1]) if self.t_us[-1] else 0.0,
-                "camera": k, "index": j, "timestamp_us": int(t_us)}
-
     def _write_transforms(self) -> None:
-        """D-NeRF style transforms (Blender/OpenGL c2w, time in [0, 1]) for sharp and blurred frames."""
-        cfg = self.cfg
-        base = {"camera_angle_x": self.intr.fov_x_rad, "fl_x": self.intr.fx, "fl_y": self.intr.fy,
-                "cx": self.intr.cx, "cy": self.intr.cy, "w": self.intr.width, "h": self.intr.height}
-        split = {"train": [], "test": []}
-        for k in range(cfg.camera.n_cameras):
-            for j, i in enumerate(self.kept):
-                entry = self._frame_entry(k, j, f"./rgb/cam{k}/{j:05d}", int(self.t_us[i]))
-                entry["gray_path"] = f"./gray/cam{k}/{j:05d}"
-                split["test" if j % cfg.frames.test_every == 0 else "train"].append(entry)
-        # D-NeRF style loaders read transforms_{train,val,test}.json beside each other and resolve
-        # file_path against that folder: the held-out views are the val split too, and every blur
-        # level's folder is a complete D-NeRF scene (its blurred training frames, the sharp test views)
-        split["val"] = split["test"]
-        for name, frames in split.items():
-            write_text_atomic(self.dir / f"transforms_{name}.json", json.dumps({**base, "frames": frames}, indent=1))
-        held_out = [{**f, "file_path": "../../" + f["file_path"][2:], "gray_path": "../../" + f["gray_path"][2:]}
-                    for f in split["test"]]
-        for level, windows in self.windows.items():
-            frames, exposures = [], []
-            for name in ("test", "val"):
-                write_text_atomic(self.dir / "blur" / level / f"transforms_{name}.json",
-                                  json.dumps({**base, "frames": held_out}, indent=1))
-            for k in range(cfg.camera.n_cameras):
-                for j, (first, last) in windows.items():
-                    t_mid = int(round((self.t_us[first] + self.t_us[last]) / 2))
-                    if j % cfg.frames.test_every:
-                        frames.append(self._frame_entry(k, j, f"./cam{k}/{j:05d}", t_mid))
-                    exposures.append({"camera": k, "index": j, "first_frame_us": int(self.t_us[first]),
-                                      "last_frame_us": int(self.t_us[last]), "center_us": t_mid,
-                                      "n_frames": int(last - first + 1),
-                                      "exposure_ms": round(1e3 * (last - first + 1) / cfg.render.fps, 4)})
-            write_text_atomic(self.dir / "blur" / level / "transforms_train.json", json.dumps({**base, "frames": frames}, indent=1))
-            write_text_atomic(self.dir / "blur" / level / "exposures.json", json.dumps(exposures, indent=1))
+        write_transforms(self.dir, self.intr, self.t_us, self.poses, self.kept, self.windows, self.cfg.frames.test_every,
+                         self.cfg.render.fps)
 
 
 def main(argv=None) -> int:
