@@ -125,7 +125,8 @@ def snapshot_folders(scene_folder: Path) -> list[tuple[float, Path]]:
     return sorted(out)
 
 
-def load_pairs(dataset: SceneDataset, files: dict[str, Path], inputs: tuple[str, ...]) -> list[tuple[np.ndarray, np.ndarray]]:
+def load_pairs(dataset: SceneDataset, files: dict[str, Path], inputs: tuple[str, ...],
+               images: dict[Path, np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
     """(scored prediction, ground truth) per test view, in the benchmark's order, after the protocol's
     correction (events only: the log-intensity gain / offset; otherwise none)."""
     from common.color_correction import correct_colors
@@ -134,10 +135,9 @@ def load_pairs(dataset: SceneDataset, files: dict[str, Path], inputs: tuple[str,
 
     channels = channels_for(inputs)
     scorer = Scorer(dataset, channels, None if "rgb" in inputs else (lambda p, g: correct_colors(p, g)[0]))
-    intr = dataset.intrinsics
     pairs = []
     for rec in dataset.frames("test"):
-        pred = read_render(files[render_stem(rec)], intr.width, intr.height, channels)
+        pred = images[files[render_stem(rec)]]          # read and checked once, by score_renders
         gt = load_frame(dataset, rec, channels)
         pairs.append((scorer.correct(pred, gt), gt))
     return pairs
@@ -195,20 +195,21 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
         stems = [render_stem(r) for r in ds.frames("test")]
         snaps = [(s, render_files(f, stems)) for s, f in snapshot_folders(folder)]
         plan.append((folder, ds, render_files(folder, stems), snaps))
-    for folder, ds, files, snaps in plan:   # read every image once before scoring anything
+    images: dict[Path, np.ndarray] = {}
+    for folder, ds, files, snaps in plan:   # read every image once, before scoring anything
         intr = ds.intrinsics
         for f in [*files.values(), *(p for _, fs in snaps for p in fs.values())]:
-            read_render(f, intr.width, intr.height, channels)
+            images[f] = read_render(f, intr.width, intr.height, channels)
     rows = []
     for folder, ds, files, snaps in plan:
         t0 = time.time()
         scene, speed = split_variant(ds.dir.name)
         masks = [ds.dynamic_mask(r) for r in ds.frames("test")]
         masks = masks if any(m is not None for m in masks) else None
-        final = score_pairs(load_pairs(ds, files, seen), lpips_net=lpips_net, masks=masks)
+        final = score_pairs(load_pairs(ds, files, seen, images), lpips_net=lpips_net, masks=masks)
         snapshots = []
         for seconds, fs in snaps:
-            s = score_pairs(load_pairs(ds, fs, seen), lpips_net=None)
+            s = score_pairs(load_pairs(ds, fs, seen, images), lpips_net=None)
             snapshots.append({"wall_s": seconds, **{k: s[k] for k in snapshot_metrics if k in s}})
         if train_seconds is not None and not any(abs(p["wall_s"] - train_seconds) < 1e-9 for p in snapshots):
             snapshots.append({"wall_s": train_seconds, **{k: final[k] for k in ("psnr", "ssim", "lpips") if k in final}})
