@@ -17,49 +17,59 @@ def add_dataset_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="dataset root (default data/<preset>)")
     p.add_argument("--jobs", type=positive_int, default=1, help="scenes generated side by side (default 1)")
     p.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
-    p.add_argument("--scene-file", type=Path, default=None,
+    p.add_argument("--scene-file", type=Path, action="append", default=None,
                    help="your own animated scene instead of the preset's: .blend, .glb/.gltf, .fbx, .obj, .usd*, .abc "
-                        "(the preset's overrides apply; docs/dataset.md, 'Make a dataset from your own scene')")
+                        "(the preset's overrides apply; docs/dataset.md, 'Make a dataset from your own scene'); "
+                        "may be given several times")
     p.add_argument("--kind", choices=("object", "room"), default="object",
                    help="with --scene-file: cameras around the content (object) or inside it (room)")
-    p.add_argument("--scene-config", type=Path, default=None,
-                   help="a scene YAML (e.g. one with source: {file: ...}) instead of the preset's scenes")
+    p.add_argument("--scene-config", type=Path, action="append", default=None,
+                   help="a scene YAML (e.g. one with source: {file: ...}) instead of the preset's scenes; "
+                        "may be given several times")
     add_ray_arguments(p, "each scene's generation")
     p.set_defaults(func=run_dataset)
 
 
-def run_one_scene(args: argparse.Namespace) -> int:
-    """--scene-file / --scene-config: one scene, in a worker process like every scene."""
-    import subprocess
-
+def own_scene_args(files: list[Path], configs: list[Path], kind: str) -> dict[str, list[str]]:
+    """--scene-file / --scene-config: each scene's name and its worker's arguments; one line for a
+    YAML without a name, or two sources with one name (they would write one folder)."""
     from common.config import read_yaml_mapping
-    from common.taskpool import child_env, die_with_parent
+    from datagen.config import file_scene_name
 
-    out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
-    cmd = [sys.executable, "-m", "datagen.generate", "--preset", str(args.preset), "--out", str(out),
-           "--checkpoint-every", str(args.checkpoint_every)]
-    if args.scene_config:
-        name = read_yaml_mapping(args.scene_config).get("name")
+    args: dict[str, list[str]] = {}
+
+    def add(name: str, worker: list[str], source: Path) -> None:
+        if name in args:
+            raise SystemExit(f"error: {source}: scene name {name!r} is already taken by another --scene-file or "
+                             "--scene-config (each scene needs its own folder; rename the file or set name:)")
+        args[name] = worker
+
+    for cfg in configs:
+        name = read_yaml_mapping(cfg).get("name")
         if not isinstance(name, str) or not name:
-            raise SystemExit(f"error: {args.scene_config}: name: expected the scene's name")
-        cmd += ["--scene", name, "--scene-config", str(args.scene_config)]
-    if args.scene_file:
-        cmd += ["--scene-file", str(args.scene_file), "--kind", args.kind]
-    r = subprocess.run(cmd, env=child_env(), preexec_fn=die_with_parent)
-    return 1 if r.returncode else 0
+            raise SystemExit(f"error: {cfg}: name: expected the scene's name")
+        add(name, ["--scene", name, "--scene-config", str(cfg)], cfg)
+    for f in files:
+        add(file_scene_name(f), ["--scene-file", str(f), "--kind", kind], f)
+    return args
 
 
 def run_dataset(args: argparse.Namespace) -> int:
     from datagen.build import generate_dataset, preset_scenes
 
+    scene_args = None
     if args.scene_file or args.scene_config:
-        if args.scene_file and args.scene_config:
-            raise SystemExit("error: give --scene-file or --scene-config, not both (a scene YAML names its file itself)")
-        return run_one_scene(args)
-    wanted = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
-    scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
+        if args.scenes:
+            raise SystemExit("error: --scenes picks the preset's scenes; it cannot be combined with --scene-file "
+                             "or --scene-config")
+        scene_args = own_scene_args(args.scene_file or [], args.scene_config or [], args.kind)
+        scenes = list(scene_args)
+    else:
+        wanted = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
+        scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
-    failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every, ray=ray_options(args))
+    failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every, ray=ray_options(args),
+                              scene_args=scene_args)
     done = [s for s in scenes if s not in failed]
     if done and out.is_dir():
         from datagen.summary import blur_table

@@ -285,6 +285,13 @@ def deep_merge(base: Mapping, override: Mapping) -> dict:
     return out
 
 
+def file_scene_name(path: Path) -> str:
+    """A scene file's scene (and folder) name: its stem with anything but letters, digits, - and _ as _."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem) or "scene"
+
+
 def scene_yaml_path(name: str) -> Path:
     if name not in SCENE_NAMES and not (SCENES_DIR / f"{name}.yaml").exists():
         raise ConfigError(f"unknown scene {name!r}: expected one of {', '.join(SCENE_NAMES)}")

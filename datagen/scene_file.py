@@ -18,7 +18,7 @@ import numpy as np
 
 from common.config import ConfigError, from_dict
 from datagen.cameras import intrinsics_from_fov, project
-from datagen.config import SceneConfig, deep_merge
+from datagen.config import SceneConfig, deep_merge, file_scene_name
 
 IMPORTERS = {".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"), ".fbx": ("import_scene", "fbx"),
              ".obj": ("wm", "obj_import"), ".usd": ("wm", "usd_import"), ".usda": ("wm", "usd_import"),
@@ -257,13 +257,10 @@ def resolve_file_scene(data: dict[str, Any], label: str = "") -> SceneConfig:
 def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
     """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
     scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
-    import re
-
     from common.config import read_yaml_mapping
 
     if args.scene_file:
-        name = re.sub(r"[^A-Za-z0-9_-]", "_", args.scene_file.stem) or "scene"
-        data = deep_merge({"name": name, "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
+        data = deep_merge({"name": file_scene_name(args.scene_file), "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
                           preset.overrides)
     else:
         yaml_path = Path(args.scene_config) if args.scene_config else None

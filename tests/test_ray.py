@@ -194,6 +194,26 @@ def test_dataset_through_ray_is_byte_identical_to_the_serial_one(motion_scene, t
     assert "attempt started" in (tmp_path / "logs" / "cubes.log").read_text()
 
 
+def test_a_scene_from_a_file_generates_on_ray_as_it_does_serially(tmp_path, local_ray):
+    """--scene-file scenes take the preset scenes' path on Ray too; the file's path, given relative to
+    the caller's folder, reaches the worker (which runs elsewhere) and the files are identical."""
+    from datagen.build import generate_dataset
+
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "scenes" / "make_scenes.py"), str(tmp_path / "files")],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-1500:]
+    preset = tmp_path / "p.yaml"
+    preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.01\n  render: {width: 48, height: 32, samples: 5}\n"
+                      "  camera: {n_cameras: 2}\n  frames: {keep_every: 3, test_every: 2}\n")
+    glb = os.path.relpath(tmp_path / "files" / "spinner.glb")
+    args = {"spinner": ["--scene-file", glb, "--kind", "object"]}
+    assert generate_dataset(preset, None, tmp_path / "serial", log=lambda s: None, scene_args=args) == []
+    assert generate_dataset(preset, None, tmp_path / "ray", log=lambda s: None, scene_args=args, ray=local_ray) == []
+    serial = json.loads((tmp_path / "serial" / "spinner" / "manifest.json").read_text())["files"]
+    on_ray = json.loads((tmp_path / "ray" / "spinner" / "manifest.json").read_text())["files"]
+    assert len(serial) > 10 and on_ray == serial
+
+
 def test_serial_commands_never_import_ray():
     code = ("import sys, e4dgs.cli, benchmark.runner, datagen.build, common.argtypes; "
             "p = e4dgs.cli.build_parser(); p.parse_args(['bench', '--report']); "

@@ -80,9 +80,10 @@ def test_the_worked_examples_generate(tmp_path):
     walker = tmp_path / "walker.yaml"
     walker.write_text("name: walker\nkind: object\nsource: {file: files/walker.blend}\n"
                       "blur: {target_px: {mild: 0.8, strong: 1.5}, max_exposure_ms: 4.0, sample_stride_px: 2}\n")
-    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(walker), "--preset", str(preset),
-              "--out", str(tmp_path / "data")])
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(walker), "--scene-file",     # both, side by side
+              str(tmp_path / "files" / "spinner.glb"), "--jobs", "2", "--preset", str(preset), "--out", str(tmp_path / "data")])
     assert r.returncode == 0, r.stderr[-2000:]
+    assert "2 of 2 scene(s) done" in r.stdout and "blur levels" in r.stdout
     m = json.loads((tmp_path / "data" / "walker" / "manifest.json").read_text())
     assert set(m["blur"]["levels"]) == {"mild", "strong"} and m["counts"]["timestamps"] == 31
     assert all(abs(lv["median_px"] / lv["target_px"] - 1) < 0.15 for lv in m["blur"]["levels"].values())
@@ -91,10 +92,11 @@ def test_the_worked_examples_generate(tmp_path):
     assert min(fractions) > 0.002                   # the figure moves in every view; the ground does not
     cfg = (tmp_path / "data" / "walker" / "scene.yaml").read_text()
     assert "frame_end: 49.0" in cfg and "fps: 24.0" in cfg
-    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "files" / "spinner.glb"), "--preset",
-              str(preset), "--out", str(tmp_path / "data")])
-    assert r.returncode == 0, r.stderr[-2000:]
     assert (tmp_path / "data" / "spinner" / "manifest.json").exists()
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "files" / "spinner.glb"), "--scene-file",
+              str(tmp_path / "other" / "spinner.glb"), "--preset", str(preset), "--out", str(tmp_path / "data")])
+    assert r.returncode != 0 and "spinner.glb: scene name 'spinner' is already taken" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
 
 
 STATIC = """

@@ -1,0 +1,216 @@
+"""`e4dgs viewer`: its camera arithmetic against analytic answers; a real headless Chromium connected
+to it shows the model (the image the server sends for a dataset camera and time is
+`model.render(camera, t)`, and the page's screenshot is not blank); paths that are neither a dataset
+nor a run are refused in one line; starting, serving and stopping leave no process and no file."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from viewer.geometry import (browser_intrinsics, fov_y_of, letterbox, matrix_to_quat_wxyz, pose_from_wxyz,
+                             quat_wxyz_to_matrix, render_scale, scaled)
+from viewer.headless import chromium_path
+from viewer.panels import nearest, to_uint8_rgb
+
+ROOT = Path(__file__).resolve().parent.parent
+TRAIN = {"train.iterations": 8, "train.scale_schedule": False, "train.warm_up": 3, "train.densify.enabled": False,
+         "train.init.n_points_object": 400, "train.checkpoint_every": 8, "train.snapshots": []}
+
+
+def _need_chromium():
+    if chromium_path() is None:
+        if os.environ.get("CI"):
+            pytest.fail("chromium is missing: CI must install it (.ci/run does: apt-get install chromium)")
+        pytest.skip("no chromium on this machine (apt-get install chromium)")
+
+
+# -- arithmetic -------------------------------------------------------------------------------------
+def test_quaternions_and_matrices_round_trip(rng):
+    for _ in range(50):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        q = q if q[0] >= 0 else -q
+        R = quat_wxyz_to_matrix(q)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        np.testing.assert_allclose(matrix_to_quat_wxyz(R), q, atol=1e-9)
+    # 90 degrees about z: x -> y
+    np.testing.assert_allclose(quat_wxyz_to_matrix([np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]) @ [1, 0, 0],
+                               [0, 1, 0], atol=1e-12)
+    with pytest.raises(ValueError, match="quaternion"):
+        quat_wxyz_to_matrix([0, 0, 0, 0])
+
+
+def test_browser_camera_intrinsics_are_the_pinhole_of_its_field_of_view():
+    K, w, h = browser_intrinsics(np.pi / 2, 1.5, 200)            # 90 degrees high: f = h / 2
+    assert (w, h) == (300, 200)
+    np.testing.assert_allclose(K, [[100, 0, 150], [0, 100, 100], [0, 0, 1]])
+    assert fov_y_of(K, h) == pytest.approx(np.pi / 2)
+    K2, w2, h2 = scaled(K, w, h, 0.5)
+    assert (w2, h2) == (150, 100) and fov_y_of(K2, h2) == pytest.approx(np.pi / 2)
+    c2w = pose_from_wxyz([1, 2, 3], [1, 0, 0, 0])
+    np.testing.assert_allclose(c2w, [[1, 0, 0, 1], [0, 1, 0, 2], [0, 0, 1, 3], [0, 0, 0, 1]])
+    assert render_scale(0.0) == 0.5 and render_scale(5.0) == 1.0
+
+
+def test_letterbox_centres_the_image_at_the_canvas_aspect():
+    img = np.full((260, 346, 3), 7, np.uint8)
+    canvas, (x0, y0) = letterbox(img, 2.0, [1, 2, 3])
+    assert canvas.shape == (260, 520, 3) and (x0, y0) == (87, 0)
+    assert np.array_equal(canvas[:, x0:x0 + 346], img) and np.array_equal(canvas[0, 0], [1, 2, 3])
+    canvas, (x0, y0) = letterbox(img, 1.0, [0, 0, 0])
+    assert canvas.shape == (346, 346, 3) and (x0, y0) == (0, 43)
+
+
+def test_nearest_frame_and_uint8_conversion():
+    from datagen.dataset import FrameRecord
+
+    recs = [FrameRecord(0, i, t, t / 100, Path(f"{i}.png")) for i, t in enumerate([0, 10, 20])]
+    assert [nearest(recs, t).index for t in (-5, 4, 5, 6, 100)] == [0, 0, 0, 1, 2]
+    assert nearest([], 3) is None
+    out = to_uint8_rgb(np.array([[0.0, 0.5, 1.0, 2.0]], np.float32))
+    assert out.shape == (1, 4, 3) and out[0, :, 0].tolist() == [0, 128, 255, 255]
+
+
+# -- a browser on a served model --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def trained(motion_scene, tmp_path_factory):
+    from recon.api import fit
+
+    out = tmp_path_factory.mktemp("viewer_runs")
+    fit(motion_scene, "d3dgs", out_dir=out / "d3dgs-0123", overrides={**TRAIN, "frames": "sharp"}, progress=False)
+    fit(motion_scene, "e4dgs", out_dir=out / "e4dgs-4567", overrides=TRAIN, progress=False)
+    return out
+
+
+def _wait(pred, timeout_s=90.0):
+    t0 = time.monotonic()
+    while not pred():
+        assert time.monotonic() - t0 < timeout_s, "the viewer did not answer in time"
+        time.sleep(0.05)
+
+
+def test_a_headless_browser_sees_the_model_render_at_a_dataset_camera_and_time(trained, motion_scene, tmp_path):
+    _need_chromium()
+    from recon.model import load
+    from viewer.app import Viewer
+    from viewer.headless import HeadlessChromium
+    from viewer.sources import open_source
+
+    model = load(trained / "d3dgs-0123")
+    assert model.meta.deform_enabled
+    viewer = Viewer([open_source(trained / "d3dgs"), open_source(trained / "e4dgs-4567")], port=0)
+    browser = HeadlessChromium(1100, 700)
+    try:
+        browser.open(viewer.url)
+        _wait(lambda: viewer.tab_ids() and viewer.sent.get(viewer.tab_ids()[0]) is not None
+              and viewer.sent[viewer.tab_ids()[0]].scale == 1.0)
+        cid = viewer.tab_ids()[0]
+        for camera, t in ((0, 0.0), (1, 0.7)):
+            viewer.snap(cid, camera)
+            viewer.set_time(cid, t)
+            _wait(lambda: (s := viewer.sent.get(cid)) is not None and s.camera == camera and s.t == t
+                  and s.scale == 1.0)
+            sent = viewer.sent[cid]
+            want = np.round(model.render(camera, t).numpy() * 255.0).astype(np.uint8)
+            assert sent.image.shape == want.shape == (48, 64, 3)
+            assert np.array_equal(sent.image, want)
+            x0, y0 = sent.box                               # the letterboxed frame carries it unchanged
+            assert np.array_equal(sent.frame[y0:y0 + 48, x0:x0 + 64], want)
+        other = load(trained / "e4dgs-4567")
+        assert not np.array_equal(model.render(1, 0.7).numpy(), model.render(1, 0.0).numpy())   # time matters
+        _wait(lambda: browser.evaluate("document.body.innerText.includes('at this view and time')"))
+        text = browser.evaluate("document.body.innerText")
+        assert "sharp, cam1" in text and "events" in text and "ON red, OFF blue" in text
+        assert f"{len(other):,} Gaussians" in text                                 # the second run beside it
+        time.sleep(1.0)
+        shot = cv2.imdecode(np.frombuffer(browser.screenshot(), np.uint8), cv2.IMREAD_COLOR)
+    finally:
+        browser.close()
+        viewer.stop()
+    assert shot is not None and shot.shape[1] == 1100 and shot.shape[0] > 400
+    left = shot[:, :600].astype(np.float64)                   # the 3D view (the GUI panel is on the right)
+    assert left.std() > 5.0                                   # not blank: the render and the cameras show
+    cv2.imwrite(str(tmp_path / "viewer.png"), shot)
+
+
+# -- the command --------------------------------------------------------------------------------------
+def _cli(args, cwd, **kw):
+    return subprocess.run([sys.executable, "-m", "e4dgs.cli", "viewer", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, **kw)
+
+
+def test_paths_that_are_neither_dataset_nor_run_are_refused_in_one_line(trained, tmp_path):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "model.pt").write_bytes(b"not a model")
+    cases = {tmp_path / "nowhere": "no such folder", tmp_path / "empty": "neither a dataset scene",
+             trained: "a folder of runs, not a run", tmp_path / "bad": "cannot read model file"}
+    for path, words in cases.items():
+        r = _cli([path, "--port", "0"], cwd=tmp_path)
+        assert r.returncode == 1 and words in r.stderr and str(path) in r.stderr, (path, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    run_json = trained / "e4dgs-4567" / "run.json"
+    assert json.loads(run_json.read_text())["scene_dir"]
+
+
+def _descendants(pid: int) -> set[int]:
+    out = subprocess.run(["ps", "-e", "-o", "pid=,ppid="], capture_output=True, text=True).stdout.split()
+    children = {}
+    for p, pp in zip(out[::2], out[1::2]):
+        children.setdefault(int(pp), []).append(int(p))
+    found, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            found.add(c)
+            todo.append(c)
+    return found
+
+
+def test_the_command_serves_then_stops_on_ctrl_c_leaving_no_process_and_no_file(motion_scene, tmp_path):
+    _need_chromium()
+    from viewer.headless import HeadlessChromium
+
+    work = tmp_path / "cwd"
+    work.mkdir()
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {**os.environ, "HOME": str(home), "TMPDIR": str(tmp_path / "tmp")}
+    (tmp_path / "tmp").mkdir()
+    before = {p for p in motion_scene.rglob("*")}
+    proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", str(motion_scene), "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work, env=env)
+    try:
+        url = None
+        for line in proc.stdout:
+            if "open http" in line:
+                url = line.split("open ")[1].split()[0]
+                break
+        assert url and url.startswith("http://localhost:")
+        browser = HeadlessChromium(900, 600)
+        try:
+            browser.open(url)
+            _wait(lambda: browser.evaluate("document.body.innerText.includes('events')"))
+            assert "sharp, cam0" in browser.evaluate("document.body.innerText")
+        finally:
+            browser.close()
+        helpers = _descendants(proc.pid)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err[-2000:]
+    assert "viewer: stopped" in out and "Traceback" not in err
+    time.sleep(0.5)
+    alive = [p for p in helpers if Path(f"/proc/{p}").exists()]
+    assert alive == []
+    assert list(work.iterdir()) == [] and list((tmp_path / "tmp").iterdir()) == []
+    assert {p for p in motion_scene.rglob("*")} == before
