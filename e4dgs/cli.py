@@ -22,6 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
     from simulator.cli import add_simulate_parser, add_view_parser
+    from viewer.cli import add_viewer_parser
 
     parser = argparse.ArgumentParser(prog="e4dgs", description="Event-camera 4D reconstruction toolkit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of failures")
@@ -38,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_parser(sub)
     add_testviews_parser(sub)
     add_score_parser(sub)
+    add_viewer_parser(sub)
     return parser
 
 

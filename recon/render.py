@@ -73,11 +73,15 @@ def render_views(gaussians: GaussianModel, field: DeformationField | None, camer
     """Render several cameras at one normalised time t: the deformation field runs once and every
     render shares its output (and its gradient)."""
     check_time(t)
-    means, quats, log_scales = deformed(gaussians, field, t, bf16)
-    scales, opacities = torch.exp(log_scales), gaussians.opacities
-    outs = []
-    for camera in cameras:
-        camera = camera.to(means.dtype, means.device)
-        colors = gaussians.colors(camera_center(camera), means)
-        outs.append(render(means, quats, scales, opacities, colors, camera, background, backend))
-    return outs
+    state = deformed(gaussians, field, t, bf16)
+    return [render_deformed(gaussians, state, camera, background, backend) for camera in cameras]
+
+
+def render_deformed(gaussians: GaussianModel, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
+                    camera: Camera, background: torch.Tensor, backend: str = "auto") -> RenderOutput:
+    """Render the Gaussians at a deformed state (means [N,3], quats [N,4], log-scales [N,3], as
+    `deformed` returns): several views of one time (or a viewer's moving camera) deform once."""
+    means, quats, log_scales = state
+    camera = camera.to(means.dtype, means.device)
+    colors = gaussians.colors(camera_center(camera), means)
+    return render(means, quats, torch.exp(log_scales), gaussians.opacities, colors, camera, background, backend)

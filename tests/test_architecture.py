@@ -4,7 +4,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 LAYERS = {"common": 0, "simulator": 1, "blender_scenes": 1, "datagen": 2, "e2vid": 2, "recon": 3,
-          "benchmark": 4, "e4dgs": 5}
+          "benchmark": 4, "viewer": 4, "e4dgs": 5}
 
 
 def package_imports() -> dict[str, set[tuple[str, str]]]:
@@ -27,7 +27,7 @@ def package_imports() -> dict[str, set[tuple[str, str]]]:
 
 
 def test_every_import_between_packages_points_down():
-    bad = sorted(f"{src} imports {dst} (layer {LAYERS[src]} -> {LAYERS[dst]})"
+    bad = sorted(f"{src} imports {dst} (layer {LAYERS[pkg]} -> {LAYERS[dst]})"
                  for pkg, edges in package_imports().items() for dst, src in edges if LAYERS[dst] >= LAYERS[pkg])
     assert bad == []
 

@@ -9,7 +9,7 @@ camera (each frame deforms the model anew). While the view moves, a new frame is
 camera update the browser reports, so frames / s is bounded by the browser too (a headless Chromium
 renders WebGL in software) and by the render time.
 
-    python -m benchmark.bench_viewer --run runs/quick/hinge/e4dgs_rgb [--gaussians 20000] [--seconds 10]
+    python -m viewer.bench_viewer --run runs/quick/hinge/e4dgs_rgb [--gaussians 20000] [--seconds 10]
 """
 from __future__ import annotations
 
