@@ -58,11 +58,11 @@ class SpeedStudy:
 
     def __post_init__(self):
         if self.sensor_scene and self.sensor_scene not in self.scenes:
-            raise ConfigError(f"speed.sensor_scene: {self.sensor_scene!r} is not one of speed.scenes")
+            raise ConfigError(f"sensor_scene: {self.sensor_scene!r} is not one of speed.scenes")
         if self.scenes and not self.speeds:
-            raise ConfigError("speed.speeds: expected the speed factors of the study")
+            raise ConfigError("speeds: expected the speed factors of the study")
         if any(not s >= 1 for s in self.speeds) or len(set(self.speeds)) != len(self.speeds):
-            raise ConfigError(f"speed.speeds: expected distinct speed factors >= 1, got {list(self.speeds)!r}")
+            raise ConfigError(f"speeds: expected distinct speed factors >= 1, got {list(self.speeds)!r}")
 
 
 @dataclass(frozen=True)
@@ -78,7 +78,7 @@ class AblationStudy:
 
     def __post_init__(self):
         if not self.seeds or len(set(self.seeds)) != len(self.seeds) or min(self.seeds) < 0:
-            raise ConfigError(f"ablation.seeds: expected distinct seeds >= 0, got {list(self.seeds)!r}")
+            raise ConfigError(f"seeds: expected distinct seeds >= 0, got {list(self.seeds)!r}")
 
 
 @dataclass(frozen=True)

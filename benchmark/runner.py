@@ -100,7 +100,8 @@ def resolve_job(job: Job):
     from recon.api import resolve_config
 
     try:
-        return resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides)
+        return resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides,
+                              "the preset's overrides of this job (cells, studies, scene_overrides)")
     except (ConfigError, ValueError) as exc:
         raise ConfigError(f"bench job {job.key} ({job.method}, {job.config or 'defaults'}): {exc}") from None
 

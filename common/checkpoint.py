@@ -43,3 +43,19 @@ class JobCheckpoint:
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+def torch_load(path: str | os.PathLike, what: str):
+    """`torch.load(path, weights_only=True)` on the CPU; a file torch cannot read is a ValueError of one
+    line naming the file, `what` it should have been, and the clause of torch's message that says
+    what failed (torch wraps it in a page of advice about weights_only)."""
+    import re
+
+    import torch
+
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises several types for foreign or damaged files
+        m = re.search(r"Unpickler error:\s*([^\n]+)", str(exc))
+        why = m.group(1).strip() if m else (str(exc).strip().split(".")[0] or type(exc).__name__)
+        raise ValueError(f"{path}: cannot read it as {what} ({why[:120]})") from None

@@ -8,6 +8,8 @@ prefixes it with the file and the path of the enclosing key.
 """
 from __future__ import annotations
 
+import copy
+
 import dataclasses
 import os
 import re
@@ -251,10 +253,13 @@ def parse_set(items: list[str]) -> dict[str, Any]:
     return out
 
 
-def build_config(cls: type[T], config: Any = None, overrides: Mapping[str, Any] | None = None) -> T:
+def build_config(cls: type[T], config: Any = None, overrides: Mapping[str, Any] | None = None,
+                 overrides_source: str = "--set") -> T:
     """A typed config from None (defaults), a YAML path, a mapping or an instance, with
-    dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key (and file)."""
-    source = "--set" if config is None else "<config>"
+    dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key and where it
+    came from: the file (or "<config>"), or `overrides_source` when the config is valid without the
+    overrides and only they make it wrong."""
+    source = overrides_source if config is None else "<config>"
     if config is None:
         data: dict = {}
     elif isinstance(config, (str, Path)):
@@ -266,6 +271,12 @@ def build_config(cls: type[T], config: Any = None, overrides: Mapping[str, Any] 
         data = to_dict(config)
     else:
         raise TypeError(f"config must be None, a YAML path, a mapping or a {cls.__name__}, got {type(config).__name__}")
+    if overrides and config is not None:
+        try:
+            from_dict(cls, copy.deepcopy(data))          # the file alone: its own errors are its own
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
+        source = overrides_source
     for key, value in (overrides or {}).items():
         set_dotted(data, key, value)
     try:

@@ -44,6 +44,9 @@ def own_scene_args(files: list[Path], configs: list[Path], kind: str) -> dict[st
                              "--scene-config (each scene needs its own folder; rename the file or set name:)")
         args[name] = worker
 
+    for f in [*configs, *files]:
+        if not Path(f).is_file():
+            raise SystemExit(f"error: {f}: no such file" + ("" if not Path(f).exists() else " (a folder)"))
     for cfg in configs:
         name = read_yaml_mapping(cfg).get("name")
         if not isinstance(name, str) or not name:
@@ -94,6 +97,16 @@ def add_masks_parser(sub) -> None:
     p.set_defaults(func=run_masks)
 
 
+def no_dataset_at(path: Path) -> SystemExit:
+    """The one line for a path that holds no generated scene: missing, a file, or a folder without any."""
+    if not path.exists():
+        return SystemExit(f"error: {path}: no such folder (expected a generated scene such as data/quick/hinge, "
+                          "or a dataset root such as data/quick)")
+    if not path.is_dir():
+        return SystemExit(f"error: {path}: a file, not a folder (expected a generated scene or a dataset root)")
+    return SystemExit(f"error: {path}: no manifest.json in it or in its sub-folders (not a generated dataset)")
+
+
 def run_masks(args: argparse.Namespace) -> int:
     import json
     import subprocess
@@ -103,7 +116,7 @@ def run_masks(args: argparse.Namespace) -> int:
 
     scenes = scene_dirs(args.path)
     if not scenes:
-        raise SystemExit(f"error: {args.path}: no manifest.json in it or in its sub-folders (not a generated dataset)")
+        raise no_dataset_at(args.path)
     for d in scenes:
         manifest = json.loads((d / "manifest.json").read_text())
         if manifest.get("speed"):           # a speed variant: its scene writes its masks
@@ -135,7 +148,7 @@ def run_check(args: argparse.Namespace) -> int:
 
     scenes = scene_dirs(args.path)
     if not scenes:
-        raise SystemExit(f"error: {args.path}: no manifest.json in it or in its sub-folders (not a generated dataset)")
+        raise no_dataset_at(args.path)
     failed = 0
     for d in scenes:
         try:

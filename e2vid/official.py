@@ -15,6 +15,8 @@ from typing import Any, Mapping
 
 import torch
 
+from common.checkpoint import torch_load
+
 from e2vid.networks import NetConfig, build_network
 
 
@@ -66,9 +68,9 @@ def load_checkpoint(path: str | Path) -> tuple[torch.nn.Module, dict[str, Any]]:
     if not path.exists():
         raise FileNotFoundError(f"{path}: E2VID weights file not found")
     try:
-        raw = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as err:  # noqa: BLE001 - torch raises several types for foreign files
-        raise CheckpointError(f"{path}: not a readable PyTorch checkpoint ({err})") from err
+        raw = torch_load(path, "E2VID / FireNet weights (a PyTorch checkpoint)")
+    except ValueError as err:
+        raise CheckpointError(str(err)) from None
     state = raw.get("state_dict", raw) if isinstance(raw, dict) else None
     if not isinstance(state, Mapping):
         raise CheckpointError(f"{path}: expected a dict with 'state_dict'")

@@ -43,6 +43,7 @@ from e2vid.evaluate import mean_correlation, monitor_sequences
 from e2vid.networks import FIRENET, NetConfig, build_network
 from e2vid.official import save_checkpoint
 from e2vid.synth import VAL_SEED_BASE, Sequence, SynthConfig, make_batch
+from common.checkpoint import torch_load
 from common.config import ConfigError, check_positive, dump_config
 from common.fileio import atomic_output
 
@@ -178,8 +179,8 @@ class E2VIDTrainer:
     def _load(self) -> bool:
         if not self.ckpt_path.exists():
             return False
-        ck = torch.load(self.ckpt_path, map_location="cpu", weights_only=True)
-        if ck["config"] != dump_config(self.cfg):
+        ck = torch_load(self.ckpt_path, "an E2VID training checkpoint (delete it to start again)")
+        if not isinstance(ck, dict) or ck.get("config") != dump_config(self.cfg):
             raise ValueError(f"{self.ckpt_path}: made with a different config; use another --out or delete it")
         self.net.load_state_dict(ck["net"])
         self.opt.load_state_dict(ck["opt"])

@@ -17,10 +17,12 @@ from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)
 from recon.trainer import Trainer
 
 
-def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any] | None = None):
+def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any] | None = None,
+                   overrides_source: str = "--set"):
     """A method's typed config from None (defaults), a YAML path, a mapping or an instance, with
-    dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key (and file)."""
-    return build_config(get_method(method).config_cls, config, overrides)
+    dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key and its source
+    (the file, or `overrides_source` for an override)."""
+    return build_config(get_method(method).config_cls, config, overrides, overrides_source)
 
 
 def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_dir: str | Path | None = None,

@@ -117,6 +117,8 @@ def run_render(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from recon.model import load
 
+    if args.out.exists() and not args.out.is_dir():
+        raise SystemExit(f"error: --out {args.out}: an existing file; expected a folder for the images")
     try:
         model = load(args.model)
     except (FileNotFoundError, ValueError) as exc:

@@ -82,9 +82,9 @@ class LearningRates:
         for name in ("position_init", "position_final", "position_delay_mult", "feature", "opacity", "scaling",
                      "rotation", "deform_scale"):
             if not getattr(self, name) >= 0:
-                raise ConfigError(f"lr.{name}: expected a learning rate >= 0, got {getattr(self, name)!r}")
+                raise ConfigError(f"{name}: expected a learning rate >= 0, got {getattr(self, name)!r}")
         if self.opacity_final is not None and not self.opacity_final > 0:
-            raise ConfigError(f"lr.opacity_final: expected a value > 0 (or null), got {self.opacity_final!r}")
+            raise ConfigError(f"opacity_final: expected a value > 0 (or null), got {self.opacity_final!r}")
 
 
 @dataclass(frozen=True)

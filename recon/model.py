@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from datagen.cameras import CameraTrajectory, Intrinsics
+from common.checkpoint import torch_load
 from common.fileio import atomic_output
 from recon.deform import DeformationField
 from recon.gaussians import GaussianModel
@@ -94,6 +95,9 @@ class DynamicGaussians:
         """Image [H, W, C] in [0, 1] of `camera` (a Camera, or a dataset camera index) at time t, as a torch
         tensor on the model's device (`render_numpy` gives a NumPy array on the CPU)."""
         check_time(t)
+        if isinstance(camera, bool) or not isinstance(camera, (int, np.integer, Camera)):
+            raise ValueError(f"camera: expected a Camera (recon.render.camera_from_pose(K, c2w, width, height)) or a "
+                             f"dataset camera index, got {type(camera).__name__}")
         cam = self.camera(camera, t) if isinstance(camera, (int, np.integer)) else camera
         return self.render_output(cam, t, backend).image.clamp(0.0, 1.0)
 
@@ -138,9 +142,9 @@ def load(path: str | Path) -> DynamicGaussians:
     if path.is_dir():
         path = path / "model.pt"
     if not path.exists():
+        if (path.parent / "checkpoint.pt").exists():
+            raise FileNotFoundError(f"{path}: training in {path.parent} has not finished (it has a checkpoint.pt): "
+                                    "run the same `e4dgs train` again to finish it")
         raise FileNotFoundError(f"{path}: no such model file (train one with `e4dgs train`)")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure means "not a model file"
-        raise ValueError(f"{path}: cannot read model file ({exc})") from None
+    state = torch_load(path, "a model file: not a model saved by this toolkit")
     return DynamicGaussians.from_state(state, str(path))

@@ -45,6 +45,9 @@ def camera_center(camera: Camera) -> torch.Tensor:
 
 
 def check_time(t: float) -> float:
+    if isinstance(t, (str, bytes)) or (np.ndim(t) != 0 if not isinstance(t, torch.Tensor) else t.numel() != 1):
+        raise ValueError(f"time: expected one number in [0, 1] (render one time per call), got {type(t).__name__}"
+                         + (f" of shape {tuple(np.shape(t))}" if not isinstance(t, (str, bytes)) else f" {t!r}"))
     t = float(t)
     if not 0.0 <= t <= 1.0:
         raise ValueError(f"time must lie in [0, 1] (the clip's normalised time), got {t:.6g}")

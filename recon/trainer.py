@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from datagen.dataset import SceneDataset
 from common.config import dump_config, to_dict
+from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock, write_text_atomic
 from recon import init as initial
 from recon.config import TrainConfig
@@ -232,8 +233,8 @@ class Trainer:
         path = self.out / "checkpoint.pt"
         if not path.exists():
             return False
-        state = torch.load(path, map_location="cpu", weights_only=True)
-        if state.get("format") != CHECKPOINT_FORMAT or state.get("fingerprint") != self.fingerprint:
+        state = torch_load(path, "a training checkpoint (delete it to start the run again)")
+        if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT or state.get("fingerprint") != self.fingerprint:
             raise TrainingError(f"{path}: checkpoint of a different run; delete it or use another output folder")
         self.model = DynamicGaussians.from_state(state["model"], str(path)).to(self.device)
         self.method.load_state_dict(state["method"])

@@ -204,7 +204,22 @@ def _validate_once(path: Path, f: h5py.File, full: bool) -> None:
         (check_event_datasets if full else check_structure)(f, f.attrs["width"], f.attrs["height"])
     except EventContentError as exc:
         raise EventFileError(f"{path}: {exc}") from None
+    check_declared_counts(path, f)
     _VALIDATED.add(key + (full,))
+
+
+def check_declared_counts(path: Path, f: h5py.File) -> None:
+    """Attributes that restate the events (n_events, t_end_us) must agree with them: a reader that
+    believed a wrong one would draw or train on part of the stream without a word."""
+    n = int(f["events/t"].shape[0])
+    if "n_events" in f.attrs and int(f.attrs["n_events"]) != n:
+        raise EventFileError(f"{path}: attribute n_events = {int(f.attrs['n_events'])} but the file holds {n} events "
+                             "(its attributes disagree with its events)")
+    if "t_end_us" in f.attrs and n:
+        last = int(f["events/t"][n - 1]) + int(f["t_offset"][()])
+        if int(f.attrs["t_end_us"]) < last:
+            raise EventFileError(f"{path}: attribute t_end_us = {int(f.attrs['t_end_us'])} us is before the last event "
+                                 f"({last} us): its attributes disagree with its events")
 
 
 def read_slice(f: h5py.File, i0: int, i1: int) -> np.ndarray:

@@ -207,7 +207,7 @@ def test_check_reports_missing_and_modified_files(motion_scene, tmp_path, capsys
     next(scene.glob("rgb/**/*.png")).unlink()
     r = run_cli(["check", tmp_path], capsys)        # a dataset root: every scene under it
     assert r.rc == 1 and "cameras.json: " in r.text and "missing (listed in" in r.text
-    assert_clean_failure(run_cli(["check", tmp_path / "nothing"], capsys), "nothing: no manifest.json",
+    assert_clean_failure(run_cli(["check", tmp_path / "nothing"], capsys), "nothing: no such folder",
                          tmp_path, files_under(tmp_path))
 
 

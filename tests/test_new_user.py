@@ -260,3 +260,105 @@ def test_check_compares_the_manifests_counts_with_the_files(motion_scene, tmp_pa
     out = capsys.readouterr().out
     assert f"counts.events_per_camera[0] is {m['counts']['events_per_camera'][0]}, events/cam0.h5 holds" in out
     assert "counts.kept_frames_per_camera is 1, rgb/cam0 has" in out
+
+
+# -- the second trial's batch ------------------------------------------------------------------------
+def test_event_files_whose_attributes_disagree_with_their_events_are_refused(tmp_path, capsys):
+    import h5py
+
+    from simulator.events import EventStream, make_events
+    from simulator.h5io import write_events
+
+    for attr, value, words in (("t_end_us", 100, "t_end_us = 100 us is before the last event (900 us)"),
+                               ("n_events", 2, "n_events = 2 but the file holds 3 events")):
+        path = tmp_path / f"{attr}.h5"
+        write_events(path, EventStream(make_events([0, 400, 900], [1, 2, 3], [1, 1, 1], [1, -1, 1]), 8, 4))
+        rc, err = cli(["view", path, "--out", tmp_path / f"{attr}_ok.png"], capsys)
+        assert rc == 0, err                                      # as written, the file is consistent
+        with h5py.File(path, "r+") as f:
+            f.attrs[attr] = value
+        rc, err = cli(["view", path, "--out", tmp_path / f"{attr}.png"], capsys)
+        assert rc == 1 and words in err and str(path) in err and not (tmp_path / f"{attr}.png").exists()
+
+
+def test_paths_of_the_wrong_kind_are_named_for_what_they_are(tmp_path, capsys):
+    (tmp_path / "f.txt").write_text("x")
+    for cmd in ("check", "masks"):
+        rc, err = cli([cmd, tmp_path / "nowhere"], capsys)
+        assert rc == 1 and "no such folder" in err and "manifest" not in err
+        rc, err = cli([cmd, tmp_path / "f.txt"], capsys)
+        assert rc == 1 and "a file, not a folder" in err
+        (tmp_path / "empty").mkdir(exist_ok=True)
+        rc, err = cli([cmd, tmp_path / "empty"], capsys)
+        assert rc == 1 and "empty: no manifest.json in it or in its sub-folders" in err
+    rc, err = cli(["dataset", "--scene-file", tmp_path / "missing.glb", "--out", tmp_path / "d"], capsys)
+    assert rc == 1 and "missing.glb: no such file" in err and not (tmp_path / "d").exists()
+
+
+def test_model_and_weight_files_torch_cannot_read_get_one_short_line(tmp_path, capsys, motion_scene):
+    from recon.model import load
+
+    garbage, truncated = tmp_path / "g.pt", tmp_path / "t.pt"
+    garbage.write_text("garbage\n")
+    import torch
+
+    torch.save({"a": torch.zeros(1000)}, truncated)
+    truncated.write_bytes(truncated.read_bytes()[:300])
+    for f, words in ((garbage, "Unsupported operand"), (truncated, "failed reading zip archive")):
+        with pytest.raises(ValueError) as info:
+            load(f)
+        msg = str(info.value)
+        assert msg.startswith(f"{f}: cannot read it as a model file") and words in msg
+        assert "weights_only" not in msg and "\n" not in msg and len(msg) < 300
+    rc, err = cli(["e2vid", "--events", motion_scene / "events" / "cam0.h5", "--out", tmp_path / "v",
+                   "--weights", garbage], capsys)
+    assert rc == 1 and "cannot read it as E2VID / FireNet weights" in err and "weights_only" not in err
+    unfinished = tmp_path / "run"
+    unfinished.mkdir()
+    (unfinished / "checkpoint.pt").write_bytes(b"")
+    rc, err = cli(["render", "--model", unfinished, "--camera", "0", "--t", "0.5", "--out", tmp_path / "r"], capsys)
+    assert rc == 1 and "has not finished" in err and "run the same `e4dgs train` again" in err
+    rc, err = cli(["render", "--model", unfinished, "--camera", "0", "--t", "0.5", "--out", garbage], capsys)
+    assert rc == 1 and "an existing file; expected a folder" in err
+
+
+def test_api_misuse_says_what_was_expected(motion_scene, tmp_path):
+    from recon.api import fit
+
+    model = fit(motion_scene, "d3dgs", out_dir=tmp_path / "m", progress=False,
+                overrides={"train.iterations": 2, "train.scale_schedule": False, "train.densify.enabled": False,
+                           "train.init.n_points_object": 50, "train.snapshots": []})
+    for t, words in ((np.array([0.1, 0.2]), "of shape (2,)"), ("half", "got str 'half'")):
+        with pytest.raises(ValueError, match=r"time: expected one number in \[0, 1\]") as info:
+            model.render(0, t)
+        assert words in str(info.value)
+    for camera in ([0, 1], 0.5, None):
+        with pytest.raises(ValueError, match="camera: expected a Camera"):
+            model.render(camera, 0.5)
+    assert model.render(np.int64(1), np.float32(0.5)).shape == (48, 64, 3)     # numpy scalars are fine
+
+
+def test_config_errors_blame_the_source_that_made_them(tmp_path):
+    import recon
+    from common.config import ConfigError
+
+    recipe = ROOT / "configs" / "recon" / "d3dgs_quick.yaml"
+    with pytest.raises(ConfigError) as info:                     # the file is fine, the --set is not
+        recon.resolve_config("d3dgs", recipe, {"train.lr.nosuch": 1})
+    assert str(info.value).startswith("--set: train.lr.nosuch: unknown key")
+    with pytest.raises(ConfigError) as info:                     # a section's own check: its key once
+        recon.resolve_config("d3dgs", recipe, {"train.lr.feature": -1})
+    assert str(info.value) == "--set: train.lr.feature: expected a learning rate >= 0, got -1.0"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("train:\n  lr:\n    feature: abc\n")
+    with pytest.raises(ConfigError) as info:                     # the file is wrong whatever --set says
+        recon.resolve_config("d3dgs", bad, {"train.iterations": 5})
+    assert str(info.value).startswith(f"{bad}: train.lr.feature: expected a number")
+    from benchmark.config import BenchConfig, CellSpec
+    from benchmark.runner import jobs, resolve_job
+    from common.config import build_config
+
+    cfg = build_config(BenchConfig, {"scenes": ["s"], "cells": {"a": CellSpec("d3dgs", overrides={"train.nosuch": 1})}})
+    with pytest.raises(ConfigError) as info:
+        resolve_job(next(j for j in jobs(cfg)))
+    assert "the preset's overrides of this job" in str(info.value) and "--set" not in str(info.value)

@@ -93,6 +93,8 @@ def test_the_worked_examples_generate(tmp_path):
     cfg = (tmp_path / "data" / "walker" / "scene.yaml").read_text()
     assert "frame_end: 49.0" in cfg and "fps: 24.0" in cfg
     assert (tmp_path / "data" / "spinner" / "manifest.json").exists()
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "spinner.glb").write_bytes((tmp_path / "files" / "spinner.glb").read_bytes())
     r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "files" / "spinner.glb"), "--scene-file",
               str(tmp_path / "other" / "spinner.glb"), "--preset", str(preset), "--out", str(tmp_path / "data")])
     assert r.returncode != 0 and "spinner.glb: scene name 'spinner' is already taken" in r.stderr

@@ -152,7 +152,7 @@ def test_paths_that_are_neither_dataset_nor_run_are_refused_in_one_line(trained,
     (tmp_path / "bad").mkdir()
     (tmp_path / "bad" / "model.pt").write_bytes(b"not a model")
     cases = {tmp_path / "nowhere": "no such folder", tmp_path / "empty": "neither a dataset scene",
-             trained: "a folder of runs, not a run", tmp_path / "bad": "cannot read model file"}
+             trained: "a folder of runs, not a run", tmp_path / "bad": "cannot read it as a model file"}
     for path, words in cases.items():
         r = _cli([path, "--port", "0"], cwd=tmp_path)
         assert r.returncode == 1 and words in r.stderr and str(path) in r.stderr, (path, r.stderr)
