@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job
-from benchmark.runner import job_data_dir, row_summary, run_folder
+from benchmark.job_run import job_data_dir, row_summary, run_folder
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 
 

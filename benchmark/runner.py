@@ -18,16 +18,9 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from benchmark.config import REPO, BenchConfig, Job, dump, jobs
-from common.metrics.image import score_pairs
-from datagen.dataset import SceneDataset
-from common import provenance
+from benchmark.config import BenchConfig, Job, dump, jobs  # noqa: F401 - jobs: the grid, for callers
+from benchmark.job_run import complete_row, resolve_job, reused_row, row_summary, run_job
 from common.fileio import write_text_atomic
-from common.provenance import git_commit
-
-
-def versions() -> dict:
-    return provenance.versions("torch")
 
 
 def read_results(path: Path) -> list[dict]:
@@ -47,12 +40,6 @@ def write_results(path: Path, rows: list[dict]) -> None:
     write_text_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows))
 
 
-def job_data_dir(job: Job, data_root: Path) -> Path:
-    """The scene folder a job trains on: data_root/<scene or its speed variant>, or that folder in the
-    sibling dataset job.dataset (data/<dataset>/...)."""
-    return (data_root.parent / job.dataset if job.dataset else data_root) / job.data_scene
-
-
 def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callable[[str], None], ray=None) -> None:
     """Generate the scenes of dataset preset `dataset` that data_root lacks (skips complete ones).
     `scenes` may name speed variants (garage_x4): their scene is generated, which writes them."""
@@ -67,143 +54,6 @@ def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callab
     failed = generate_dataset(dataset, missing, data_root, jobs=min(2, len(missing)), log=log, ray=ray)
     if failed:
         raise RuntimeError(f"dataset generation failed for {', '.join(failed)} (run `e4dgs bench` again to resume)")
-
-
-def evaluate_model(method_obj, model, records, lpips_net: str | None, placement=None) -> dict:
-    """Scores of `model` on `records`, rendered on the run's (device, backend) (default: CPU, auto),
-    over the whole images and, where the scene has dynamic masks, over the moving pixels (`*_dyn`)."""
-    device, backend = placement or ("cpu", "auto")
-    masks = [method_obj.dataset.dynamic_mask(r) for r in records]
-    return score_pairs(method_obj.eval_pairs(model.to(device), records, backend), lpips_net=lpips_net,
-                       masks=masks if any(m is not None for m in masks) else None)
-
-
-DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
-
-
-def has_masks(job: Job, data_root: Path) -> bool:
-    """Whether the job's scene folder has dynamic masks (`e4dgs masks`, or generated with them)."""
-    return (job_data_dir(job, data_root) / "dynamic" / "masks.json").exists()
-
-
-def complete_row(row: dict, job: Job, cfg: BenchConfig, data_root: Path) -> bool:
-    """Whether a finished row holds every score the job needs now: LPIPS where it is wanted, and the
-    dynamic-region scores once its scene has masks (a row scored before is scored again, from the
-    trained model: nothing is trained twice)."""
-    return (row.get("status") != "failed" and (row.get("lpips") is not None or not wants_lpips(job, cfg))
-            and ("psnr_dyn" in row or not has_masks(job, data_root)))
-
-
-def resolve_job(job: Job):
-    """The typed method config of a job (its config file plus overrides); ConfigError names the job."""
-    from common.config import ConfigError
-    from recon.api import resolve_config
-
-    try:
-        return resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides,
-                              "the preset's overrides of this job (cells, studies, scene_overrides)")
-    except (ConfigError, ValueError) as exc:
-        raise ConfigError(f"bench job {job.key} ({job.method}, {job.config or 'defaults'}): {exc}") from None
-
-
-def data_stats(dataset: SceneDataset) -> dict:
-    """What the scene folder holds, for the tables: its speed, the events per second per camera (mean
-    over cameras), and for a speed variant its shutter's exposure, blur (median / p90 px) and
-    blurred-vs-sharp PSNR."""
-    m = dataset.manifest
-    rates = m.get("events_per_second_per_camera") or [0]
-    out = {"speed": (m.get("speed") or {}).get("factor", 1.0), "events_per_s_per_camera": sum(rates) / len(rates)}
-    level = ((m.get("blur") or {}).get("levels") or {}).get("shutter")
-    if level:
-        out.update(exposure_ms=level["exposure_ms"], blur_median_px=level["median_px"], blur_p90_px=level["p90_px"],
-                   blur_psnr_db=(level.get("psnr_vs_sharp_db") or {}).get("median_db"))
-    return out
-
-
-def scores_snapshots(job: Job) -> bool:
-    """Whether a job's earlier snapshots are scored again on every test view: the main study's (the
-    accuracy-vs-time curves); the studies' curves stay in their log.jsonl (~25 s of a task saved)."""
-    return job.study == "main"
-
-
-def wants_lpips(job: Job, cfg: BenchConfig) -> bool:
-    """Whether a job's row needs LPIPS: the speed study reads PSNR only, so its own runs skip LPIPS-VGG
-    (~30 s of a task) unless speed.lpips; a row without it is not reused for a job that needs it."""
-    return not (job.study == "speed" and not cfg.speed.lpips)
-
-
-def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool, method_cfg=None) -> dict:
-    from recon.device import run_placement
-    from recon.methods import get_method
-    from recon.model import load
-    from recon.trainer import Trainer
-
-    method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
-    scene_dir = job_data_dir(job, data_root)
-    run_dir = out_root / job.folder
-    t0 = time.time()
-    dataset = SceneDataset(scene_dir)
-    trainer = Trainer(get_method(job.method)(dataset, method_cfg), run_dir, progress)
-    untrained = trainer.initial_model()
-    model = trainer.run()
-    train_elapsed = time.time() - t0
-    scorer = get_method(job.method).scorer(dataset, method_cfg)
-    placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
-    records = dataset.frames("test")
-    t1 = time.time()
-    lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
-    final = evaluate_model(scorer, model, records, lpips_net, placement)
-    # the floor: what the method's own starting model scores after the same correction (an events-only
-    # score means something about events only as far as it rises above this)
-    floor = evaluate_model(scorer, untrained, records, None, placement)
-    log_rows = [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
-    snapshots = []
-    for row in log_rows:
-        if "snapshot" not in row:
-            continue
-        if row["iteration"] == model.meta.iteration:
-            scores = {k: final[k] for k in ("psnr", "ssim", "lpips") if k in final}
-        elif not scores_snapshots(job):      # the tables plot the main study's curves only: the others keep
-            continue                         # their training log's test PSNR (log.jsonl), not re-rendered
-        else:
-            snap = load(run_dir / row["snapshot"])
-            s = evaluate_model(scorer, snap, records, None, placement)
-            scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
-        snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
-    return {
-        **job.identity(), **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
-        **{k: final[k] for k in DYN_KEYS if k in final},
-        "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"],
-        **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}), "data": data_stats(dataset),
-        "n_test_images": final["n_images"],
-        "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
-        "device": str(placement[0]), "backend": placement[1],
-        "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),
-        "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
-        "versions": versions(), "git_commit": git_commit(), "lpips_net": lpips_net,
-    }
-
-
-def reused_row(job: Job, row: dict) -> dict:
-    """The results row of `job` taken from `row`, a finished job with the same training folder: the
-    same config hash, so the same model and the same scores (the blur study's level of the main
-    cells, the ablation's full seed-0 run). Nothing is trained or scored twice."""
-    return {**row, **job.identity(), "train_elapsed_s": 0.0, "eval_s": 0.0, "scored_as": row["key"]}
-
-
-def run_folder(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool,
-               method_cfgs: list) -> list[dict]:
-    """Train and score the first of `jobs` (which share one training folder; one that needs LPIPS goes
-    first), the rest reuse its row."""
-    order = sorted(range(len(jobs)), key=lambda i: not wants_lpips(jobs[i], cfg))
-    jobs, method_cfgs = [jobs[i] for i in order], [method_cfgs[i] for i in order]
-    first = run_job(jobs[0], cfg, data_root, out_root, progress, method_cfg=method_cfgs[0])
-    return [first] + [reused_row(job, first) for job in jobs[1:]]
-
-
-def row_summary(row: dict) -> str:
-    lpips = f" LPIPS {row['lpips']:.3f}" if row.get("lpips") is not None else ""
-    return f"{row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f}{lpips}, {row['wall_s']:.0f} s training"
 
 
 def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,

@@ -177,7 +177,7 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
                   log=print) -> list[dict]:
     """Results rows of an outside method's renders, one per scene folder under `renders`. Every file
     is checked before anything is scored (RenderError names the first bad one)."""
-    from benchmark.runner import DYN_KEYS, data_stats, versions
+    from benchmark.job_run import DYN_KEYS, data_stats, versions
     from common.metrics.image import score_pairs
     from common.provenance import git_commit
     from datagen.speed import split_variant

@@ -106,9 +106,15 @@ class SceneDataset:
     def dynamic_mask(self, rec: FrameRecord) -> np.ndarray | None:
         """bool [H, W]: the test view's pixels whose surface moves (datagen.dynamic); None when the scene
         has no masks."""
-        from datagen.dynamic import read_mask
+        from datagen.dynamic import mask_path
 
-        return read_mask(self.dir, rec.camera, rec.index)
+        p = mask_path(self.dir, rec.camera, rec.index)
+        if not (self.dir / "dynamic" / "masks.json").exists():      # written last: the masks are complete
+            return None
+        m = cv2.imread(str(p), cv2.IMREAD_UNCHANGED) if p.exists() else None
+        if m is None or m.ndim != 2:
+            raise DatasetError(f"{p}: missing or not a single-channel mask image (`e4dgs masks --force` writes it again)")
+        return m > 127
 
     def event_file(self, camera: int) -> Path:
         return self.dir / "events" / f"cam{camera}.h5"

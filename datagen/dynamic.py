@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from common.fileio import write_text_atomic
@@ -71,16 +70,3 @@ def write_masks(scene_dir: Path, masks: dict[tuple[int, int], np.ndarray], thres
         views.append({"camera": k, "index": j, "dynamic_fraction": round(float(m.mean()), 6)})
     write_text_atomic(Path(scene_dir) / "dynamic" / "masks.json", json.dumps(
         {"definition": DEFINITION, "threshold_px": threshold_px, "views": views}, indent=1))
-
-
-def read_mask(scene_dir: Path, camera: int, index: int) -> np.ndarray | None:
-    """bool [H, W] of a test view, or None when the scene has no masks (generated before they existed:
-    `e4dgs masks` adds them)."""
-    p = mask_path(scene_dir, camera, index)
-    if not (Path(scene_dir) / "dynamic" / "masks.json").exists():      # written last: the masks are complete
-        return None
-    m = cv2.imread(str(p), cv2.IMREAD_UNCHANGED) if p.exists() else None
-    if m is None or m.ndim != 2:
-        from datagen.dataset import DatasetError
-        raise DatasetError(f"{p}: missing or not a single-channel mask image (`e4dgs masks --force` writes it again)")
-    return m > 127

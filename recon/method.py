@@ -1,8 +1,9 @@
-"""The hooks a reconstruction method implements for the shared trainer (recon.trainer.Trainer) and
-the class-level half that scoring needs (recon.scoring.Scorer): subclass `Method` and `@register` it."""
+"""The hooks a reconstruction method implements for the shared trainer and the class-level half that
+scoring needs (recon.scoring.Scorer): subclass `Method` and `@register` it. Training hooks receive a
+`StepContext` (what they may use of the trainer), so this file does not import the trainer."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable, Protocol
 
 import numpy as np
 import torch
@@ -11,8 +12,16 @@ from datagen.dataset import SceneDataset
 from recon.model import DynamicGaussians
 from recon.scoring import Scorer
 
-if TYPE_CHECKING:
-    from recon.trainer import Trainer
+class StepContext(Protocol):
+    """What a method's training hooks may use of the trainer that calls them (recon.trainer.Trainer is
+    one): the model being trained, the raster backend, the training's random generator, the next
+    view index of a shuffled epoch, and the training config."""
+    model: DynamicGaussians
+    backend: str
+    rng: np.random.Generator
+    tcfg: Any
+
+    def next_index(self, n: int) -> int: ...
 
 
 class Method:
@@ -57,11 +66,11 @@ class Method:
         """Additional Adam groups (dicts with params, lr, name)."""
         return []
 
-    def step(self, trainer: "Trainer", iteration: int):
+    def step(self, trainer: StepContext, iteration: int):
         """Loss of one iteration -> (loss tensor, [(RenderOutput, Camera)] whose means2d kept their grad)."""
         raise NotImplementedError
 
-    def prune_mask(self, trainer: "Trainer", iteration: int) -> torch.Tensor | None:
+    def prune_mask(self, trainer: StepContext, iteration: int) -> torch.Tensor | None:
         """Gaussians to prune at this iteration (bool [N]) or None (called every iteration, after backward)."""
         return None
 

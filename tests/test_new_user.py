@@ -355,7 +355,8 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
         recon.resolve_config("d3dgs", bad, {"train.iterations": 5})
     assert str(info.value).startswith(f"{bad}: train.lr.feature: expected a number")
     from benchmark.config import BenchConfig, CellSpec
-    from benchmark.runner import jobs, resolve_job
+    from benchmark.config import jobs
+    from benchmark.job_run import resolve_job
     from common.config import build_config
 
     cfg = build_config(BenchConfig, {"scenes": ["s"], "cells": {"a": CellSpec("d3dgs", overrides={"train.nosuch": 1})}})
