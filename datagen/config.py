@@ -317,11 +317,22 @@ def load_preset(preset: str | Path) -> PresetConfig:
     return preset_cfg
 
 
+def read_scene_yaml(path: Path) -> dict:
+    """A scene YAML as a mapping; a top-level `file: my_scene.blend` is short for `source: {file: ...}`."""
+    data = read_yaml_mapping(path)
+    if "file" in data:
+        source = data.get("source") or {}
+        if not isinstance(source, Mapping) or "file" in source:
+            raise ConfigError(f"{path}: file: given twice (as file: and as source.file:); keep one")
+        data["source"] = {**source, "file": data.pop("file")}
+    return data
+
+
 def resolve_scene(name: str, overrides: Mapping[str, Any] | None = None,
                   scene_file: str | Path | None = None) -> SceneConfig:
     """Scene YAML (or `scene_file`) with `overrides` merged in, parsed strictly."""
     path = Path(scene_file) if scene_file else scene_yaml_path(name)
-    data = deep_merge(read_yaml_mapping(path), overrides or {})
+    data = deep_merge(read_scene_yaml(path), overrides or {})
     try:
         cfg = from_dict(SceneConfig, data)
     except ConfigError as exc:

@@ -18,7 +18,7 @@ import numpy as np
 
 from common.config import ConfigError, from_dict
 from datagen.cameras import intrinsics_from_fov, project
-from datagen.config import SceneConfig, deep_merge, file_scene_name
+from datagen.config import SceneConfig, deep_merge, file_scene_name, read_scene_yaml
 
 IMPORTERS = {".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"), ".fbx": ("import_scene", "fbx"),
              ".obj": ("wm", "obj_import"), ".usd": ("wm", "usd_import"), ".usda": ("wm", "usd_import"),
@@ -257,14 +257,12 @@ def resolve_file_scene(data: dict[str, Any], label: str = "") -> SceneConfig:
 def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
     """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
     scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
-    from common.config import read_yaml_mapping
-
     if args.scene_file:
         data = deep_merge({"name": file_scene_name(args.scene_file), "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
                           preset.overrides)
     else:
         yaml_path = Path(args.scene_config) if args.scene_config else None
-        raw = read_yaml_mapping(yaml_path) if yaml_path else {}
+        raw = read_scene_yaml(yaml_path) if yaml_path else {}
         data = deep_merge(raw, preset.scene(cfg.name))
         f = Path(cfg.source.file)
         data["source"] = {**data.get("source", {}), "file": str(f if f.is_absolute() or yaml_path is None

@@ -199,3 +199,18 @@ def test_the_files_own_cameras_film_it(tmp_path):
     r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(cfg), "--preset", str(preset),
               "--out", str(tmp_path / "other")])
     assert r.returncode != 0 and "no camera object 'CamB' (the file's cameras: CamA)" in r.stderr
+
+
+def test_a_top_level_file_key_is_short_for_source_file(tmp_path):
+    from common.config import ConfigError
+    from datagen.config import resolve_scene
+
+    long = tmp_path / "long.yaml"
+    long.write_text("name: w\nkind: object\nsource: {file: w.blend, rig: config}\n")
+    short = tmp_path / "short.yaml"
+    short.write_text("name: w\nkind: object\nfile: w.blend\nsource: {rig: config}\n")
+    assert resolve_scene("w", scene_file=short) == resolve_scene("w", scene_file=long)
+    both = tmp_path / "both.yaml"
+    both.write_text("name: w\nfile: a.blend\nsource: {file: b.blend}\n")
+    with pytest.raises(ConfigError, match="file: given twice"):
+        resolve_scene("w", scene_file=both)
