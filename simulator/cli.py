@@ -89,6 +89,11 @@ def check_output(out: Path, frames: Path) -> None:
         raise SystemExit(f"error: --out {out}: is a folder; expected an event file name ending in .h5")
     if out.resolve().parent == frames.resolve():
         raise SystemExit(f"error: --out {out}: inside the --frames folder; write the events elsewhere")
+    for folder in [out.parent, *out.parent.parents]:      # the nearest existing ancestor must be a folder
+        if folder.exists():
+            if not folder.is_dir():
+                raise SystemExit(f"error: --out {out}: {folder} is not a folder, so the event file cannot be made there")
+            break
 
 
 def run_simulate(args: argparse.Namespace) -> int:
@@ -112,6 +117,9 @@ def run_simulate(args: argparse.Namespace) -> int:
             t0 = parse_time_us(args.t0)
         except ValueError as exc:
             raise SystemExit(f"error: --t0: {exc}") from None
+        if len(files) > 1 and args.fps > 1e6:
+            raise SystemExit(f"error: --fps {args.fps:g}: frames would be less than 1 us apart, and timestamps are whole "
+                             "microseconds; the highest frame rate is 1e6 (or give --timestamps)")
         t_us = [t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
     try:
         r = simulate_files(files, t_us, args.out, config, args.seed, args.checkpoint_every)

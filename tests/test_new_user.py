@@ -363,3 +363,15 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
     with pytest.raises(ConfigError) as info:
         resolve_job(next(j for j in jobs(cfg)))
     assert "the preset's overrides of this job" in str(info.value) and "--set" not in str(info.value)
+
+
+def test_simulate_names_a_frame_rate_beyond_microseconds_and_an_output_under_a_file(frames, tmp_path, capsys):
+    rc, err = cli(["simulate", "--frames", frames, "--fps", "1e9", "--out", tmp_path / "e.h5"], capsys)
+    assert rc == 1 and "less than 1 us apart" in err and "timestamps must increase" not in err
+    (tmp_path / "note.txt").write_text("x")
+    out = tmp_path / "note.txt" / "sub" / "e.h5"
+    rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", out], capsys)
+    assert rc == 1 and "note.txt is not a folder" in err and "File exists" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames", "note.txt"]
+    rc, err = cli(["simulate", "--frames", frames, "--fps", "1e6", "--out", tmp_path / "ok.h5"], capsys)
+    assert rc == 0, err                                        # 1 us apart is still whole microseconds
