@@ -248,7 +248,7 @@ def resolve_file_scene(data: dict[str, Any], label: str = "") -> SceneConfig:
                              f"({'use kind: room' if cfg.kind == 'object' else 'set camera: radius, height, target'}"
                              " or source.rig: config with your own camera values)")
     rig = (f"the file's cameras {', '.join(src.cameras)}" if src.cameras else
-           f"rig target {np.round(cfg.camera.target, 3).tolist()}, radius {cfg.camera.radius:.3g}, height {cfg.camera.height:.3g}")
+           f"rig target {(np.round(cfg.camera.target, 3) + 0.0).tolist()}, radius {cfg.camera.radius:.3g}, height {cfg.camera.height:.3g}")
     print(f"{label or cfg.name}: frames {start:g}..{end:g} at {fps:g} fps -> {cfg.duration_s:g} s clip; {rig}; "
           f"moving content in view {', '.join(f'{100 * s:.0f} %' for s in shares)}", flush=True)
     return cfg

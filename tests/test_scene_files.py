@@ -214,3 +214,40 @@ def test_a_top_level_file_key_is_short_for_source_file(tmp_path):
     both.write_text("name: w\nfile: a.blend\nsource: {file: b.blend}\n")
     with pytest.raises(ConfigError, match="file: given twice"):
         resolve_scene("w", scene_file=both)
+
+
+EXPORT = """
+import sys, bpy
+sys.path.insert(0, r"{examples}")
+import make_scenes
+from pathlib import Path
+make_scenes.spinner(Path("."))
+bpy.ops.export_scene.fbx(filepath="spinner.fbx", bake_anim=True)
+bpy.ops.wm.usd_export(filepath="spinner.usdc", export_animation=True)
+bpy.ops.wm.alembic_export(filepath="spinner.abc", start=1, end=25)
+bpy.ops.wm.obj_export(filepath="spinner.obj")
+"""
+
+
+def test_fbx_usd_and_alembic_scenes_generate_and_an_obj_without_animation_is_refused(tmp_path):
+    """The glTF example exported by Blender to the other formats it imports headless: each becomes a
+    complete dataset with the same rig; OBJ carries no animation, so it is refused as a still scene."""
+    _bpy(EXPORT.format(examples=ROOT / "examples" / "scenes"), tmp_path)
+    preset = tmp_path / "p.yaml"
+    preset.write_text(TINY_PRESET)
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "spinner.fbx"), "--scene-file",
+              str(tmp_path / "spinner.usdc"), "--preset", str(preset), "--out", str(tmp_path / "a")], cwd=tmp_path)
+    assert r.returncode != 0 and "already taken" in r.stderr                 # one stem, one folder
+    rigs = []
+    for ext in ("fbx", "usdc", "abc"):
+        out = tmp_path / f"data_{ext}"
+        r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / f"spinner.{ext}"), "--preset",
+                  str(preset), "--out", str(out)], cwd=tmp_path)
+        assert r.returncode == 0, (ext, r.stderr[-1500:])
+        m = json.loads((out / "spinner" / "manifest.json").read_text())
+        assert m["counts"]["timestamps"] == 31 and min(m["counts"]["events_per_camera"]) > 100
+        rigs.append(next(ln for ln in r.stdout.splitlines() if "rig target" in ln).split("; ")[1])
+    assert len(set(rigs)) == 1, rigs                                          # same bounds, same rig
+    r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "spinner.obj"), "--preset", str(preset),
+              "--out", str(tmp_path / "data_obj")], cwd=tmp_path)
+    assert r.returncode == 1 and "spinner.obj: nothing moves" in r.stderr
