@@ -53,7 +53,9 @@ def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callab
     log(f"bench: generating dataset {dataset} for {', '.join(missing)} -> {data_root}")
     failed = generate_dataset(dataset, missing, data_root, jobs=min(2, len(missing)), log=log, ray=ray)
     if failed:
-        raise RuntimeError(f"dataset generation failed for {', '.join(failed)} (run `e4dgs bench` again to resume)")
+        raise RuntimeError(f"dataset generation failed for {', '.join(failed)} (the error lines above say why: a "
+                           "scene that was killed or crashed resumes when `e4dgs bench` runs again; one refused for "
+                           "its input needs that input fixed first)")
 
 
 def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,
