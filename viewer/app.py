@@ -29,6 +29,7 @@ from viewer.sources import Source
 
 FRAME_US = 1e6 / 3000.0        # one rendered frame of the datasets (3000 FPS): the slider's step
 TICK_S = 0.02                  # the render thread's polling period
+SNAP_ECHO_S = 0.5              # camera reports this soon after we moved the browser's camera are its echo
 CAMERA_COLORS = [(230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48), (145, 30, 180)]
 
 
@@ -54,6 +55,7 @@ class TabState:
     snap_request: int | None = 0  # a new tab opens on cam0's view at t = 0
     snap_pose: np.ndarray | None = None
     snap_sent: list = field(default_factory=list)   # recent poses we put the browser's camera at (their echoes)
+    snap_set_at: float = 0.0      # when we last moved the browser's camera
     last_move: float = 0.0
     dirty: bool = True            # background must be rendered again
     panels_dirty: bool = True     # the side images must be redrawn
@@ -216,8 +218,10 @@ class Viewer:
             if st.snapped is not None:
                 client = self.server.get_clients().get(client_id)
                 pose = pose_from_wxyz(client.camera.position, client.camera.wxyz) if client else None
-                if pose is not None and any(np.allclose(pose, p, atol=1e-3) for p in st.snap_sent):
-                    return                           # the echo of our own snap (the browser reports late)
+                if time.monotonic() - st.snap_set_at < SNAP_ECHO_S or (
+                        pose is not None and any(np.allclose(pose, p, atol=1e-2) for p in st.snap_sent)):
+                    return                           # the echo of our own snap (the browser reports late,
+                                                     # and may report the steps between its parts)
                 st.snapped = None
                 st.snap_pose = None
                 st.snap_sent = []
@@ -246,6 +250,7 @@ class Viewer:
         intr = self.trajectories[st.snapped].intrinsics
         st.snap_pose = c2w
         st.snap_sent = st.snap_sent[-15:] + [c2w]
+        st.snap_set_at = time.monotonic()
         with client.atomic():
             client.camera.fov = fov_y_of(intr.K, intr.height)
             client.camera.position = c2w[:3, 3]
@@ -288,7 +293,9 @@ class Viewer:
         elif st.snapped is not None and self.panels is not None:
             rec = self.panels.sharp_frame(st.snapped, round(st.t * self.duration_us))
             img = to_uint8_rgb(self.dataset.load_image(rec.path))
-        else:
+        else:                                  # a dataset seen from a free view: the 3D scene alone
+            if self.sent.pop(client.client_id, None) is not None:
+                client.scene.set_background_image(None)
             return
         frame, box = img, (0, 0)
         if st.snapped is not None:          # the exact camera's image, undistorted in the browser's canvas
