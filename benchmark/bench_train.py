@@ -127,7 +127,7 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
 
     import recon
     from datagen.dataset import SceneDataset
-    from recon.config import E4DGSConfig
+    from recon.methods.e4dgs_config import E4DGSConfig
     from recon.methods import get_method
     try:
         from recon.methods.e4dgs import importance

@@ -7,12 +7,13 @@ light, sRGB-encoded). Loss: (1 - lambda) L1 + lambda D-SSIM with lambda = 0.2.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Literal
 
 import torch
 
 from datagen.dataset import DatasetError, FrameRecord, SceneDataset
-from recon.config import D3DGSConfig
+from recon.config import TrainConfig
 from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
@@ -27,6 +28,16 @@ class TrainView:
     time: float            # normalised clip time in [0, 1]
     image: torch.Tensor    # [H, W, C]
 
+
+
+@dataclass(frozen=True)
+class D3DGSConfig:
+    """D3DGS on the dataset's RGB frames: `frames: sharp` (the paper's "w/o blur") or a blur level
+    ("w/ blur": the blurred frames, each at the pose of its exposure centre)."""
+    frames: str = "sharp"
+    channels: Literal[1, 3] = 3       # 1: train on the grayscale frames
+    lambda_dssim: float = 0.2
+    train: TrainConfig = field(default_factory=TrainConfig)
 
 @register
 class D3DGS(Method):

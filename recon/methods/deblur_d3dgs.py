@@ -12,12 +12,15 @@ consistency: needs a pretrained optical-flow network; masks from a segmentation 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import torch
 import torch.nn.functional as F
 
 from datagen.dataset import DatasetError, SceneDataset
 from recon import events as ev
-from recon.config import DeblurD3DGSConfig
+from common.config import ConfigError, check_positive
+from recon.config import TrainConfig
 from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
@@ -31,6 +34,31 @@ def lowres_l1(render: torch.Tensor, target: torch.Tensor, factor: int) -> torch.
     pool = lambda im: F.avg_pool2d(im.permute(2, 0, 1)[None], factor, ceil_mode=True)  # noqa: E731
     return (pool(render) - pool(target)).abs().mean()
 
+
+
+@dataclass(frozen=True)
+class DeblurD3DGSConfig:
+    """Deblur-D3DGS (the Deblur4DGS blur model on the D3DGS representation): trained on the frames of
+    blur level `frames`, each predicted as the mean in linear light of `blur_samples` renders spread
+    over its exposure (recon.events.exposure_mean), plus Deblur4DGS's multi-resolution consistency:
+    lambda_lowres x L1 between the render at the exposure centre and the blurred frame, both
+    area-averaged over lowres_factor x lowres_factor blocks (blur moves little at that scale)."""
+    frames: str = "medium"
+    blur_samples: int = 5
+    lambda_dssim: float = 0.2
+    lambda_lowres: float = 1.0
+    lowres_factor: int = 4
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def __post_init__(self):
+        check_positive(self, "blur_samples", "lowres_factor")
+        if self.blur_samples % 2 == 0:
+            raise ConfigError(f"blur_samples: expected an odd count (the middle render is the sharp frame at the "
+                              f"exposure centre), got {self.blur_samples}")
+        if self.frames == "sharp":
+            raise ConfigError("frames: Deblur-D3DGS trains on a blur level (mild, medium, strong), not 'sharp'")
+        if self.lambda_lowres < 0 or not 0 <= self.lambda_dssim <= 1:
+            raise ConfigError("lambda_lowres, lambda_dssim: expected lambda_lowres >= 0 and lambda_dssim in [0, 1]")
 
 @register
 class DeblurD3DGS(Method):

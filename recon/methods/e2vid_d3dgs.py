@@ -8,6 +8,8 @@ are scored after the same colour correction (`color_correct`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import torch
 
@@ -17,7 +19,7 @@ from e2vid.official import load_checkpoint
 from e2vid.reconstruct import reconstruct_frames
 from e2vid.weights import default_weights_path
 from common.color_correction import correct_colors
-from recon.config import E2VIDD3DGSConfig
+from recon.config import TrainConfig
 from recon.methods import register
 from recon.methods.d3dgs import D3DGS, TrainView
 from recon.views import record_camera
@@ -34,6 +36,19 @@ def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, net
     return reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height,
                               np.asarray(t_us, np.int64), events_per_window or None, net.cfg.num_bins)
 
+
+
+@dataclass(frozen=True)
+class E2VIDD3DGSConfig:
+    """E2VID + D3DGS: each camera's events -> intensity frames at its training frames' timestamps
+    (a recurrent network run over the whole stream), then D3DGS on those frames (grayscale).
+    `weights: ""` is the network this project trained (e2vid/weights/); any official-layout file
+    (e.g. E2VID_lightweight.pth.tar) works too. events_per_window 0: one window per frame interval."""
+    weights: str = ""
+    events_per_window: int = 0
+    lambda_dssim: float = 0.2
+    color_correct: bool = True       # score after the same log-intensity gain/offset fit as E-4DGS
+    train: TrainConfig = field(default_factory=TrainConfig)
 
 @register
 class E2VIDD3DGS(D3DGS):

@@ -28,7 +28,7 @@ from torch import nn
 from datagen.dataset import SceneDataset
 from recon import events as ev
 from common.color_correction import correct_colors
-from recon.config import E4DGSConfig
+from recon.methods.e4dgs_config import E4DGSConfig
 from recon.event_windows import EventSource, WindowSampler
 from recon.device import to_device
 from recon.losses import photometric_loss
