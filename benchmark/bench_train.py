@@ -126,7 +126,7 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
     import torch
 
     import recon
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
     from recon.methods.e4dgs_config import E4DGSConfig
     from recon.methods import get_method
     try:

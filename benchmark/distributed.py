@@ -20,7 +20,7 @@ from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray
 
 def run_group(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Path, method_cfgs: list) -> list[dict]:
     """On a worker: check the scene's files, then train (or resume) and score each job of one folder."""
-    from datagen.verify import verify_scene
+    from scene_format.verify import verify_scene
 
     scene_dir = job_data_dir(jobs[0], data_root)
     problems = verify_scene(scene_dir)

@@ -11,7 +11,7 @@ from benchmark.config import REPO, BenchConfig, Job
 from common import provenance
 from common.provenance import git_commit
 from common.metrics.image import score_pairs
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 
 
 def versions() -> dict:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmark.testviews import RENDER_SUFFIXES, render_stem
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 
 INPUTS = {"rgb": ("rgb",), "events": ("events",), "events+rgb": ("events", "rgb")}
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
@@ -146,7 +146,7 @@ def load_pairs(dataset: SceneDataset, files: dict[str, Path], inputs: tuple[str,
 def _scene_folders(data_root: Path, renders: Path) -> list[tuple[Path, SceneDataset]]:
     """(render folder, its dataset scene) for every sub-folder of `renders`; RenderError for a folder
     that is not a scene of the dataset, or a stray file."""
-    from datagen.dataset import DatasetError
+    from scene_format.reader import DatasetError
 
     if not renders.is_dir():
         raise RenderError(f"{renders}: no such folder (expected <renders>/<scene>/cam<k>/<index>.png)")

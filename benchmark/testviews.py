@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from common.fileio import write_text_atomic
-from datagen.cameras import opencv_to_blender
-from datagen.dataset import FrameRecord, SceneDataset
+from scene_format.cameras import opencv_to_blender
+from scene_format.reader import FrameRecord, SceneDataset
 
 FORMAT = "e4dgs-testviews/1"
 RENDER_SUFFIXES = (".png", ".exr")
@@ -60,8 +60,8 @@ def test_views(dataset: SceneDataset) -> dict:
 def write_test_views(path: Path, out: Path | None = None) -> list[Path]:
     """testviews.json for the scene at `path`, or for every scene (speed variants included) under a
     dataset root; into each scene's folder, or into out/<scene>/. Returns the files written."""
-    from datagen.dataset import DatasetError
-    from datagen.verify import scene_dirs
+    from scene_format.reader import DatasetError
+    from scene_format.verify import scene_dirs
 
     dirs = scene_dirs(path)
     if not dirs:

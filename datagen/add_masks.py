@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from datagen import render as R
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from datagen.dynamic import write_masks
 from datagen.generate import SceneJob
 

@@ -82,7 +82,7 @@ def track_world(local_pts: np.ndarray, obj_index: np.ndarray, obj_mats) -> np.nd
 
 def project_tracks(K: np.ndarray, c2w: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixel coordinates [T, N, 2] and depths [T, N] of world points [T, N, 3] seen by a camera whose
-    OpenCV pose is c2w [T, 4, 4] (pixel centres at +0.5, as datagen.cameras.project)."""
+    OpenCV pose is c2w [T, 4, 4] (pixel centres at +0.5, as scene_format.cameras.project)."""
     w2c = np.linalg.inv(c2w)
     r, t = w2c[:, None, :3, :3], w2c[:, None, :3, 3]                 # [T, 1, 3, 3], [T, 1, 3]
     pc = [r[..., i, 0] * world[..., 0] + r[..., i, 1] * world[..., 1] + r[..., i, 2] * world[..., 2] + t[..., i]

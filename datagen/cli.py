@@ -112,7 +112,7 @@ def run_masks(args: argparse.Namespace) -> int:
     import subprocess
 
     from common.taskpool import child_env, die_with_parent
-    from datagen.verify import scene_dirs
+    from scene_format.verify import scene_dirs
 
     scenes = scene_dirs(args.path)
     if not scenes:
@@ -144,7 +144,7 @@ def run_check(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from datagen.verify import scene_dirs, verify_scene
+    from scene_format.verify import scene_dirs, verify_scene
 
     scenes = scene_dirs(args.path)
     if not scenes:

@@ -7,256 +7,18 @@ written to `<scene>/scene.yaml`.
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Mapping
+from typing import Any, Mapping
 
 
-from common.config import ConfigError, check_positive, from_dict, read_yaml_mapping
-from simulator.config import SimulatorConfig
+from common.config import ConfigError, from_dict, read_yaml_mapping
+from scene_format.config import SceneConfig, deep_merge, parse_scene, read_scene_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = ROOT / "blender_scenes"
 PRESETS_DIR = ROOT / "configs"
 SCENE_NAMES = ("lego", "rubiks_cube", "mc_toy", "hinge", "cubes", "capsule", "restroom", "garage")
-
-
-MAX_RENDER_PIXELS = 4096 * 4096
-
-
-@dataclass(frozen=True)
-class RenderConfig:
-    """engine: workbench (rasteriser, noise-free; default) | cycles | eevee. samples: anti-aliasing
-    samples for workbench (1, 5, 8, 11, 16, 32), path-tracing samples for cycles, TAA samples for eevee."""
-    engine: Literal["workbench", "cycles", "eevee"] = "workbench"
-    samples: int = 8
-    fps: float = 3000.0
-    width: int = 346
-    height: int = 260
-
-    def __post_init__(self):
-        check_positive(self, "samples", "fps", "width", "height")
-        if self.width * self.height > MAX_RENDER_PIXELS:
-            raise ConfigError(f"width, height: {self.width} x {self.height} is more than {MAX_RENDER_PIXELS:,} pixels "
-                              "(4096 x 4096); every camera's frames and simulator state must fit in memory")
-        if self.engine == "workbench" and self.samples not in (1, 5, 8, 11, 16, 32):
-            raise ConfigError(f"samples: workbench supports 1, 5, 8, 11, 16 or 32 samples, got {self.samples}")
-
-
-@dataclass(frozen=True)
-class ShakeConfig:
-    """High-frequency camera egomotion (a hand-held or robot-mounted rig): each camera rotates about
-    its own axes by a sum of `components` sinusoids per axis, with frequencies drawn log-uniformly in
-    [min_hz, max_hz] (real time, Hz) and random phases, seeded per scene and camera.
-
-    rms_deg is the RMS rotation about the pan and tilt axes; roll gets roll_scale times that.
-    rms_deg: 0 turns shake off.
-    """
-    rms_deg: float = 0.0
-    min_hz: float = 4.0
-    max_hz: float = 25.0
-    components: int = 3
-    roll_scale: float = 0.5
-
-    def __post_init__(self):
-        check_positive(self, "min_hz", "max_hz", "components")
-        if not 0 <= self.rms_deg <= 10:
-            raise ConfigError(f"rms_deg: expected 0 to 10 degrees, got {self.rms_deg!r}")
-        if not self.min_hz <= self.max_hz:
-            raise ConfigError(f"max_hz: expected at least min_hz ({self.min_hz}), got {self.max_hz!r}")
-        if not 0 <= self.roll_scale <= 2:
-            raise ConfigError(f"roll_scale: expected 0 to 2, got {self.roll_scale!r}")
-
-
-@dataclass(frozen=True)
-class CameraRigConfig:
-    """Cameras uniformly spaced in azimuth on a spiral around `target`, at constant height.
-
-    Camera k starts at azimuth azimuth0_deg + 360 k / n_cameras and turns by sweep_deg over the clip;
-    its distance from the vertical axis through the target goes from radius to radius + radius_change.
-    `shake` adds high-frequency rotation about each camera's own axes on top of the look-at pose.
-    """
-    n_cameras: int = 6
-    radius: float = 4.0
-    height: float = 1.5
-    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    azimuth0_deg: float = 0.0
-    sweep_deg: float = 30.0
-    radius_change: float = 0.0
-    fov_x_deg: float = 50.0
-    shake: ShakeConfig = field(default_factory=ShakeConfig)
-
-    def __post_init__(self):
-        check_positive(self, "n_cameras", "radius", "fov_x_deg")
-        if not self.fov_x_deg < 170:
-            raise ConfigError(f"fov_x_deg: expected less than 170 degrees, got {self.fov_x_deg}")
-        if not self.radius + self.radius_change > 0:
-            raise ConfigError("radius_change: the spiral must keep a positive radius")
-
-
-@dataclass(frozen=True)
-class LightingConfig:
-    """Workbench studio lighting, fixed in world space so every camera sees the same shading
-    (`shading: flat` shows unlit texture colours)."""
-    shading: Literal["studio", "flat"] = "studio"
-    studio_light: str = "Default"
-    rotate_z_deg: float = 30.0
-    shadows: bool = True
-    shadow_intensity: float = 0.4
-    light_direction: tuple[float, float, float] = (0.4, -0.3, 0.85)
-    cavity: bool = False
-    background: tuple[float, float, float] = (0.05, 0.05, 0.06)  # linear RGB of the empty background
-    exposure: float = 1.0  # linear gain on rendered radiance (a brighter or dimmer scene)
-
-    def __post_init__(self):
-        check_positive(self, "exposure")
-
-
-@dataclass(frozen=True)
-class FramesConfig:
-    """keep_every: store RGB frames at every n-th rendered timestamp. test_every: of those, every
-    n-th one per camera is held out for testing (llffhold)."""
-    keep_every: int = 30
-    test_every: int = 8
-
-    def __post_init__(self):
-        check_positive(self, "keep_every", "test_every")
-
-
-@dataclass(frozen=True)
-class BlurConfig:
-    """Motion-blur levels declared by what they do: level name -> target blur length in pixels.
-
-    The blur length of a blurred frame is the median, over the pixels covered by geometry, of the
-    length of the image path each visible surface point travels during the exposure (computed from
-    the scene geometry and camera poses, `datagen.blur_geometry`). The generator picks, per level,
-    the exposure (a whole number of rendered frames, at most max_exposure_ms and the clip) whose
-    median over every camera and blurred frame is closest to the target; a level whose closest
-    exposure misses the target by more than `tolerance` (relative) is an error, never a clamp.
-    sample_stride_px: the blur length is measured on every n-th pixel in x and y.
-    """
-    target_px: dict[str, float] = field(default_factory=dict)
-    exposure_ms: dict[str, float] = field(default_factory=dict)   # levels of a fixed exposure (real-time ms)
-    tolerance: float = 0.15
-    max_exposure_ms: float = 40.0
-    sample_stride_px: int = 4
-
-    def __post_init__(self):
-        check_positive(self, "tolerance", "max_exposure_ms", "sample_stride_px")
-        for level, px in self.target_px.items():
-            if not px > 0:
-                raise ConfigError(f"target_px.{level}: expected a positive blur length in pixels, got {px!r}")
-        values = list(self.target_px.values())
-        if len(set(values)) != len(values):
-            raise ConfigError(f"target_px: two levels share a target ({self.target_px})")
-        for level, ms in self.exposure_ms.items():
-            if not ms > 0:
-                raise ConfigError(f"exposure_ms.{level}: expected a positive exposure in milliseconds, got {ms!r}")
-            if level in self.target_px:
-                raise ConfigError(f"exposure_ms.{level}: level {level!r} is also declared in target_px")
-        if not self.tolerance < 1:
-            raise ConfigError(f"tolerance: expected a relative tolerance below 1, got {self.tolerance!r}")
-
-    @property
-    def levels(self) -> list[str]:
-        """Level names: those declared in pixels from the weakest to the strongest blur, then those
-        declared by a fixed exposure from the shortest to the longest."""
-        return sorted(self.target_px, key=self.target_px.get) + sorted(self.exposure_ms, key=self.exposure_ms.get)
-
-
-@dataclass(frozen=True)
-class SpeedConfig:
-    """Speed variants: the same render traversed `factors` times faster (datagen.speed).
-
-    Variant s of scene NAME is the folder NAME_x<s>: the clip's timestamps divided by s, the events
-    re-simulated from the same rendered frames at those timestamps with the scene's sensor, and
-    blurred frames (level `shutter`) of a fixed real-time exposure `exposure_ms`, which integrate
-    exposure_ms * fps * s rendered frames. A speed whose exposure exceeds the clip, or a render whose
-    image moves more than `max_px_per_frame` (p90) between rendered frames, is refused.
-    """
-    factors: tuple[float, ...] = ()
-    exposure_ms: float = 2.0
-    max_px_per_frame: float = 2.0
-
-    def __post_init__(self):
-        check_positive(self, "exposure_ms", "max_px_per_frame")
-        for s in self.factors:
-            if not (isinstance(s, (int, float)) and s >= 1):
-                raise ConfigError(f"factors: expected speed factors >= 1, got {s!r}")
-        if len(set(self.factors)) != len(self.factors):
-            raise ConfigError(f"factors: a speed appears twice ({list(self.factors)})")
-
-
-SCENE_FILE_SUFFIXES = (".blend", ".glb", ".gltf", ".fbx", ".obj", ".usd", ".usda", ".usdc", ".usdz", ".abc")
-
-
-@dataclass(frozen=True)
-class SourceConfig:
-    """Where the scene comes from: built in code (blender_scenes/<name>.py; `file` empty) or a file
-    made elsewhere (.blend, or glTF / FBX / OBJ / USD / Alembic imported headless). A file's own
-    animation, frames frame_start .. frame_end at `fps` (read from the file when not given), is the
-    clip: it spans the normalised time [0, 1], played in duration_s seconds (the file's own length
-    unless the scene YAML or the preset sets duration_s). rig `auto` places the camera rig from the
-    animated bounding box (around it for kind object, inside it for kind room); `config` keeps camera:
-    as written. `cameras` names camera objects of the file to film with instead of the rig."""
-    file: str = ""
-    frame_start: float | None = None
-    frame_end: float | None = None
-    fps: float | None = None
-    rig: Literal["auto", "config"] = "auto"
-    # camera objects of the file to use instead of the rig (their animated poses and their common lens)
-    cameras: tuple[str, ...] = ()
-
-    def __post_init__(self):
-        if self.file and not self.file.lower().endswith(SCENE_FILE_SUFFIXES):
-            raise ConfigError(f"file: {self.file!r} is not a format Blender imports headless here "
-                              f"(expected {', '.join(SCENE_FILE_SUFFIXES)})")
-        if self.fps is not None and not self.fps > 0:
-            raise ConfigError(f"fps: expected a positive frame rate, got {self.fps!r}")
-        if self.frame_start is not None and self.frame_end is not None and not self.frame_end > self.frame_start:
-            raise ConfigError(f"frame_end: expected a frame after frame_start ({self.frame_start}), got {self.frame_end}")
-
-
-@dataclass(frozen=True)
-class SceneConfig:
-    name: str
-    kind: Literal["object", "room"]
-    description: str = ""
-    duration_s: float = 0.2
-    motion_strength: float = 1.0
-    seed: int = 0
-    render: RenderConfig = field(default_factory=RenderConfig)
-    camera: CameraRigConfig = field(default_factory=CameraRigConfig)
-    lighting: LightingConfig = field(default_factory=LightingConfig)
-    frames: FramesConfig = field(default_factory=FramesConfig)
-    blur: BlurConfig = field(default_factory=BlurConfig)  # no target_px: no blurred frames
-    sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
-    speed: float = 1.0     # this folder's time compression: the clip lasts duration_s / speed real seconds
-    speeds: SpeedConfig = field(default_factory=SpeedConfig)   # speed variants written beside the scene
-    source: SourceConfig = field(default_factory=SourceConfig)   # built in code, or a file's scene
-
-    def __post_init__(self):
-        check_positive(self, "duration_s")
-        if not self.speed >= 1:
-            raise ConfigError(f"speed: expected a time compression factor >= 1, got {self.speed!r}")
-        if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
-            raise ConfigError(f"motion_strength: expected a value >= 0, got {self.motion_strength!r}")
-
-    @property
-    def n_timestamps(self) -> int:
-        """Rendered timestamps: the clip [0, duration] sampled at fps, both ends included."""
-        return int(round(self.duration_s * self.render.fps)) + 1
-
-    @property
-    def real_duration_s(self) -> float:
-        """How long the clip lasts for the sensor and the shutter: duration_s / speed."""
-        return self.duration_s / self.speed
-
-    @property
-    def real_fps(self) -> float:
-        """Rendered frames per real second: render.fps * speed."""
-        return self.render.fps * self.speed
 
 
 @dataclass(frozen=True)
@@ -273,16 +35,6 @@ class PresetConfig:
     def scene(self, name: str) -> dict[str, Any]:
         """The overrides of one scene: the preset's, then the scene's own."""
         return deep_merge(self.overrides, self.scene_overrides.get(name, {}))
-
-
-def deep_merge(base: Mapping, override: Mapping) -> dict:
-    out = copy.deepcopy(dict(base))
-    for key, value in override.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = deep_merge(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
 
 
 def file_scene_name(path: Path) -> str:
@@ -317,26 +69,11 @@ def load_preset(preset: str | Path) -> PresetConfig:
     return preset_cfg
 
 
-def read_scene_yaml(path: Path) -> dict:
-    """A scene YAML as a mapping; a top-level `file: my_scene.blend` is short for `source: {file: ...}`."""
-    data = read_yaml_mapping(path)
-    if "file" in data:
-        source = data.get("source") or {}
-        if not isinstance(source, Mapping) or "file" in source:
-            raise ConfigError(f"{path}: file: given twice (as file: and as source.file:); keep one")
-        data["source"] = {**source, "file": data.pop("file")}
-    return data
-
-
 def resolve_scene(name: str, overrides: Mapping[str, Any] | None = None,
                   scene_file: str | Path | None = None) -> SceneConfig:
     """Scene YAML (or `scene_file`) with `overrides` merged in, parsed strictly."""
     path = Path(scene_file) if scene_file else scene_yaml_path(name)
-    data = deep_merge(read_scene_yaml(path), overrides or {})
-    try:
-        cfg = from_dict(SceneConfig, data)
-    except ConfigError as exc:
-        raise ConfigError(f"{path}: {exc}") from None
+    cfg = parse_scene(deep_merge(read_scene_yaml(path), overrides or {}), path)
     if scene_file is None and cfg.name != name:
         raise ConfigError(f"{path}: name: expected {name!r}, got {cfg.name!r}")
     return cfg

@@ -23,6 +23,7 @@ import numpy as np
 from common.fileio import write_text_atomic
 from common.imageio import write_png
 from datagen.blur_geometry import track_world
+from scene_format.reader import mask_path
 
 THRESHOLD_PX = 2.0
 DEFINITION = ("a pixel is dynamic when the surface point it sees at the view's time moves, at some time of the clip, "
@@ -56,10 +57,6 @@ def mask_image(hit: np.ndarray, motion_px: np.ndarray, width: int, height: int,
     out = np.zeros(height * width, bool)
     out[np.flatnonzero(hit)] = motion_px >= threshold_px
     return out.reshape(height, width)
-
-
-def mask_path(scene_dir: Path, camera: int, index: int) -> Path:
-    return Path(scene_dir) / "dynamic" / f"cam{camera}" / f"{index:05d}.png"
 
 
 def write_masks(scene_dir: Path, masks: dict[tuple[int, int], np.ndarray], threshold_px: float = THRESHOLD_PX) -> None:

@@ -30,10 +30,12 @@ from common.provenance import git_commit as _git_commit
 from datagen import render as R
 from datagen.blur import BlurStack
 from datagen.blur_geometry import BlurReport, measure_blur_many
-from datagen.cameras import intrinsics_from_fov, scene_poses
-from datagen.config import SceneConfig, load_preset, resolve_scene
+from scene_format.cameras import intrinsics_from_fov
+from datagen.rig import scene_poses
+from scene_format.config import SceneConfig
+from datagen.config import load_preset, resolve_scene
 from datagen.preview import blur_psnr, contact_sheet, speed_sheet
-from datagen.transforms import write_transforms
+from scene_format.transforms import write_transforms
 from datagen.speed import SHUTTER_LEVEL, check_interpolation, check_speeds, variant_config, variant_name
 from common.checkpoint import JobCheckpoint
 from common.config import ConfigError, dump_config

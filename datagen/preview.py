@@ -11,7 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from common.imageio import write_png
 from common.metrics import psnr
 from simulator.h5io import read_window

@@ -16,8 +16,8 @@ import bpy
 import mathutils
 import numpy as np
 
-from datagen.cameras import FLIP_YZ, Intrinsics
-from datagen.config import SceneConfig
+from scene_format.cameras import FLIP_YZ, Intrinsics
+from scene_format.config import SceneConfig
 from blender_scenes.common import ANIM_FRAMES
 from common.imageio import read_exr
 
@@ -200,7 +200,8 @@ def render_clip(cfg: SceneConfig, tau: np.ndarray, camera_ids=(0,), camera_tau: 
     """
     import time
 
-    from datagen.cameras import intrinsics_from_fov, scene_poses
+    from scene_format.cameras import intrinsics_from_fov
+    from datagen.rig import scene_poses
 
     cams = build_scene(cfg, intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg))
     poses = scene_poses(cfg, tau if camera_tau is None else camera_tau)

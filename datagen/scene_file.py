@@ -17,8 +17,9 @@ import bpy
 import numpy as np
 
 from common.config import ConfigError, from_dict
-from datagen.cameras import intrinsics_from_fov, project
-from datagen.config import SceneConfig, deep_merge, file_scene_name, read_scene_yaml
+from scene_format.cameras import intrinsics_from_fov, project
+from scene_format.config import SceneConfig, deep_merge, read_scene_yaml
+from datagen.config import file_scene_name
 
 IMPORTERS = {".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"), ".fbx": ("import_scene", "fbx"),
              ".obj": ("wm", "obj_import"), ".usd": ("wm", "usd_import"), ".usda": ("wm", "usd_import"),
@@ -181,7 +182,7 @@ def file_camera_fov(path: Path, names: tuple[str, ...]) -> float:
 def file_camera_poses(cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
     """OpenCV c2w [C, T, 4, 4] of the file's cameras source.cameras at normalised times tau (the file
     is loaded; their scale is removed)."""
-    from datagen.cameras import FLIP_YZ
+    from scene_format.cameras import FLIP_YZ
 
     sc = bpy.context.scene
     src = cfg.source
@@ -198,7 +199,7 @@ def file_camera_poses(cfg: SceneConfig, tau: np.ndarray) -> np.ndarray:
 
 def in_view(cfg: SceneConfig, moving: list[np.ndarray]) -> list[float]:
     """Per camera the mean share of the moving surface (points probed over the clip) in its image."""
-    from datagen.cameras import scene_poses
+    from datagen.rig import scene_poses
 
     intr = intrinsics_from_fov(cfg.render.width, cfg.render.height, cfg.camera.fov_x_deg)
     probe_tau = np.linspace(0, 1, len(moving))

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from common.config import build_config, parse_set, set_dotted  # noqa: F401  (parse_set, set_dotted re-exported)
 from recon.methods import get_method
 from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)

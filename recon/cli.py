@@ -23,7 +23,7 @@ def add_train_parser(sub) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from datagen.dataset import DatasetError
+    from scene_format.reader import DatasetError
     from common.config import ConfigError
     from recon.api import fit, parse_set
     from recon.trainer import TrainingError
@@ -96,7 +96,7 @@ def render_test_views(model, scene_dir: Path, out: Path, fmt: str = "png") -> in
     """Every held-out view of a scene rendered by `model`, saved as out/cam<k>/<index>.<fmt> (EXR: float32,
     the same sRGB-encoded values in [0, 1] as the PNG). Returns the number of views."""
     from common.imageio import write_exr, write_png
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
     from recon.views import record_camera
 
     dataset = SceneDataset(scene_dir)

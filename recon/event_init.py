@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon import events as ev
 from recon import init as initial
 from recon.event_windows import EventSource

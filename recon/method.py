@@ -8,7 +8,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 import torch
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon.model import DynamicGaussians
 from recon.scoring import Scorer
 

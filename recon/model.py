@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from datagen.cameras import CameraTrajectory, Intrinsics
+from scene_format.cameras import CameraTrajectory, Intrinsics
 from common.checkpoint import torch_load
 from common.fileio import atomic_output
 from recon.deform import DeformationField

@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon.model import DynamicGaussians
 from recon.views import load_frame, record_camera
 

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock, write_text_atomic
@@ -58,8 +58,7 @@ def scene_extent(dataset: SceneDataset) -> float:
 
 def scene_background(dataset: SceneDataset, channels: int) -> list[float]:
     """The stored (sRGB) colour of the scene's empty background."""
-    light = dataset.config.lighting
-    linear = np.clip(np.asarray(light.background) * light.exposure, 0, 1)
+    linear = np.asarray(dataset.scene.background_linear)
     if channels == 1:
         return [float(linear_to_srgb(rec709_luma(linear)))]
     return [float(c) for c in linear_to_srgb(linear)]
@@ -67,8 +66,8 @@ def scene_background(dataset: SceneDataset, channels: int) -> list[float]:
 
 def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
     ic = cfg.init
-    rig = dataset.config.camera
-    auto = "cube" if dataset.config.kind == "object" else "sphere"
+    scene = dataset.scene
+    auto = "cube" if scene.kind == "object" else "sphere"
     kind = ic.kind if ic.kind != "auto" else auto
     if kind == "events":
         n = ic.n_points_object if auto == "cube" else ic.n_points_room
@@ -78,11 +77,11 @@ def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
                                ic.carve_dilate_px, ic.seed)
         return pts
     if kind == "cube":
-        half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * rig.radius
-        return initial.random_cube(ic.n_points_object, half, rig.target, ic.seed)
+        half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * scene.rig_radius_m
+        return initial.random_cube(ic.n_points_object, half, scene.rig_target, ic.seed)
     if kind == "sphere":
         radius = ic.sphere_radius if ic.sphere_radius is not None else 10.0
-        return initial.dense_to_sparse_sphere(ic.n_points_room, radius, rig.target, ic.seed)
+        return initial.dense_to_sparse_sphere(ic.n_points_room, radius, scene.rig_target, ic.seed)
     path = Path(ic.points_file)
     if not path.exists():
         raise FileNotFoundError(f"init.points_file: {path} does not exist")
@@ -154,7 +153,7 @@ class Trainer:
         deform = DeformationField()
         meta = ModelMeta(method=self.method.name, channels=channels, sh_degree=self.tcfg.sh_degree, background=bg,
                          extent=self.extent, duration_us=self.dataset.duration_us,
-                         deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.config.name,
+                         deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.scene.name,
                          config=to_dict(self.cfg))
         model = DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
         self.method.setup_model(model)
@@ -361,7 +360,7 @@ class Trainer:
         self._start()
         snaps = self._snapshot_iterations()
         bar = tqdm(total=self.tcfg.iterations, initial=self.iteration, disable=not self.progress,
-                   desc=f"{self.method.name} {self.dataset.config.name}", dynamic_ncols=True)
+                   desc=f"{self.method.name} {self.dataset.scene.name}", dynamic_ncols=True)
         while self.iteration < self.tcfg.iterations:
             it = self.iteration + 1
             t0 = time.perf_counter()

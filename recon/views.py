@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from datagen.dataset import DatasetError, FrameRecord, SceneDataset
+from scene_format.reader import DatasetError, FrameRecord, SceneDataset
 from recon.raster import Camera
 from recon.render import camera_from_pose
 from common.color import srgb_luma

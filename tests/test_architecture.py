@@ -3,8 +3,8 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-LAYERS = {"common": 0, "simulator": 1, "blender_scenes": 1, "datagen": 2, "e2vid": 2, "recon": 3,
-          "benchmark": 4, "viewer": 4, "e4dgs": 5}
+LAYERS = {"common": 0, "simulator": 1, "blender_scenes": 1, "scene_format": 2, "e2vid": 2, "datagen": 3,
+          "recon": 4, "benchmark": 5, "viewer": 5, "e4dgs": 6}
 
 
 def package_imports() -> dict[str, set[tuple[str, str]]]:
@@ -30,6 +30,19 @@ def test_every_import_between_packages_points_down():
     bad = sorted(f"{src} imports {dst} (layer {LAYERS[pkg]} -> {LAYERS[dst]})"
                  for pkg, edges in package_imports().items() for dst, src in edges if LAYERS[dst] >= LAYERS[pkg])
     assert bad == []
+
+
+def test_reconstruction_and_the_viewer_never_import_the_generator():
+    """They read scene folders through scene_format; the Blender render loop is not theirs to import."""
+    edges = package_imports()
+    assert sorted(src for dst, src in edges["recon"] | edges["viewer"] if dst in ("datagen", "blender_scenes")) == []
+
+
+def test_reconstruction_reads_the_scene_description_not_the_generator_config():
+    """recon reads `dataset.scene` (a frozen SceneDescription); `dataset.config` is the generator's."""
+    users = [str(f.relative_to(ROOT)) for f in (ROOT / "recon").rglob("*.py")
+             if "SceneConfig" in f.read_text() or ".config.lighting" in f.read_text() or "dataset.config" in f.read_text()]
+    assert users == []
 
 
 def test_the_layers_are_documented_as_tested():

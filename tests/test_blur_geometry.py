@@ -7,8 +7,9 @@ import pytest
 from datagen.blur import exposure_window
 from datagen.blur_geometry import (LogHistogram, candidate_windows, choose_exposures, cumulative_path_px, measure_blur,
                                    project_tracks, track_world, window_path_px)
-from datagen.cameras import axis_rotations, intrinsics_from_fov, look_at_opencv
-from datagen.config import BlurConfig
+from scene_format.cameras import intrinsics_from_fov, look_at_opencv
+from datagen.rig import axis_rotations
+from scene_format.config import BlurConfig
 from common.config import ConfigError
 
 FPS = 3000.0

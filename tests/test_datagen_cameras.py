@@ -4,10 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from datagen.cameras import (FLIP_YZ, blender_to_opencv, interpolate_pose, intrinsics_from_fov, look_at_opencv,
-                             opencv_to_blender, project, quat_to_rotmat, rig_poses, rotmat_to_quat, slerp,
-                             spiral_positions)
-from datagen.config import CameraRigConfig
+from scene_format.cameras import FLIP_YZ, blender_to_opencv, interpolate_pose, intrinsics_from_fov, look_at_opencv, opencv_to_blender, project, quat_to_rotmat, rotmat_to_quat, slerp
+from datagen.rig import rig_poses, spiral_positions
+from scene_format.config import CameraRigConfig
 from common.config import ConfigError
 
 
@@ -87,8 +86,8 @@ def test_interpolate_pose_linear_position_and_slerp_rotation():
 
 
 def test_shake_is_seeded_has_the_declared_rms_and_keeps_the_target_in_view():
-    from datagen.cameras import shake_angles
-    from datagen.config import ShakeConfig
+    from datagen.rig import shake_angles
+    from scene_format.config import ShakeConfig
 
     shake = ShakeConfig(rms_deg=2.0, min_hz=4.0, max_hz=25.0, components=3, roll_scale=0.5)
     t = np.arange(0, 20.0, 1 / 3000)

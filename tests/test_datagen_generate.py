@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from datagen.cameras import load_cameras, project
+from scene_format.cameras import load_cameras, project
 from datagen.config import SCENE_NAMES, load_preset, resolve_scene
 from common.imageio import read_exr, read_png_linear
 from simulator.events import validate_events
@@ -113,7 +113,7 @@ def test_blur_length_of_a_sliding_board_is_the_analytic_one(tmp_path):
     """A board slides sideways at constant speed before a fixed camera: every visible point moves
     fx * v / Z px per second, so an exposure of n rendered frames blurs fx * v * (n - 1) / (fps * Z) px."""
     from blender_scenes import blur_plane as B
-    from datagen.cameras import intrinsics_from_fov
+    from scene_format.cameras import intrinsics_from_fov
 
     yaml_path = ROOT / "blender_scenes" / "blur_plane.yaml"
     r = generate(tmp_path, scene="blur_plane", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
@@ -277,7 +277,8 @@ def test_every_scene_builds_and_renders(name, tmp_path):
         "import sys, numpy as np, importlib\n"
         "from datagen.config import resolve_scene\n"
         "from datagen import render as R\n"
-        "from datagen.cameras import intrinsics_from_fov, rig_poses\n"
+        "from scene_format.cameras import intrinsics_from_fov\n"
+        "from datagen.rig import rig_poses\n"
         f"cfg = resolve_scene('{name}', {{'render': {{'width': 48, 'height': 36, 'samples': 1}}}})\n"
         "R.reset_scene(); R.setup_render(cfg)\n"
         f"importlib.import_module('blender_scenes.{name}').build(cfg)\n"
@@ -294,7 +295,7 @@ def test_every_scene_builds_and_renders(name, tmp_path):
 
 
 def test_dataset_reader_on_the_tiny_scene(tiny, tmp_path):
-    from datagen.dataset import DatasetError, SceneDataset
+    from scene_format.reader import DatasetError, SceneDataset
 
     ds = SceneDataset(tiny)
     assert ds.n_cameras == 2 and ds.duration_us == 4000 and ds.intrinsics.width == 64
@@ -349,7 +350,7 @@ def _dnerf_style_load(basedir: str):
 def test_every_transforms_file_loads_with_a_dnerf_style_loader(tiny):
     """The scene folder and every blur level's folder are D-NeRF scenes as they are: the blurred
     training frames with the sharp held-out views, paths relative to each JSON's folder."""
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
 
     root = _dnerf_style_load(str(tiny))
     ds = SceneDataset(tiny)
@@ -368,7 +369,7 @@ def test_scenes_written_before_paths_were_relative_to_their_json_still_read(tiny
     """Older scenes gave blur levels' file_path relative to the scene folder: still read right."""
     import shutil
 
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
 
     scene = tmp_path / tiny.name
     shutil.copytree(tiny, scene)
@@ -405,8 +406,8 @@ def _d3dgs_camera(frame: dict, fovx: float, width: int, height: int, patched: bo
 
 
 def test_d3dgs_reader_misplaces_our_cameras_and_the_documented_patch_fixes_it(tiny):
-    from datagen.cameras import project
-    from datagen.dataset import SceneDataset
+    from scene_format.cameras import project
+    from scene_format.reader import SceneDataset
 
     ds = SceneDataset(tiny)
     meta = json.loads((tiny / "transforms_train.json").read_text())

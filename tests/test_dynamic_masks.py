@@ -12,7 +12,7 @@ import pytest
 
 from common.metrics.image import psnr_region, score_pairs, ssim, ssim_with_region
 from common.metrics.lpips import lpips_with_region
-from datagen.cameras import intrinsics_from_fov, look_at_opencv
+from scene_format.cameras import intrinsics_from_fov, look_at_opencv
 from datagen.dynamic import THRESHOLD_PX, mask_image, surface_motion_px
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -102,7 +102,7 @@ def test_a_board_moving_everywhere_is_dynamic_everywhere_and_e4dgs_masks_reprodu
 
 def test_masks_of_a_scene_with_static_and_moving_parts(motion_scene):
     """tiny_motion cubes: only the cubes move; their pixels are a proper part of each view."""
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
 
     ds = SceneDataset(motion_scene)
     fractions = [ds.dynamic_mask(r).mean() for r in ds.frames("test")]

@@ -361,7 +361,7 @@ def test_correlation_ignores_gain_and_offset():
 
 def test_e2vid_d3dgs_end_to_end_on_the_tiny_dataset(motion_scene, tmp_path):
     import recon
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
     from recon.methods.e2vid_d3dgs import E2VIDD3DGS, reconstruct_camera
 
     ds = SceneDataset(motion_scene)

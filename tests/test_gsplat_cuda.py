@@ -9,7 +9,7 @@ import pytest
 import torch
 
 import recon
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon.raster import render
 from recon.trainer import Trainer
 from tests.test_raster import camera, scene

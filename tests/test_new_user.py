@@ -238,7 +238,7 @@ def test_sensor_values_that_would_exhaust_memory_are_refused_naming_the_field(fi
 
 def test_a_camera_too_large_to_render_is_refused_naming_the_fields():
     from common.config import ConfigError
-    from datagen.config import RenderConfig
+    from scene_format.config import RenderConfig
 
     with pytest.raises(ConfigError, match="width, height: 100000 x 100000 is more than"):
         RenderConfig(width=100000, height=100000)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 import recon
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon import events as ev
 from recon.evaluate import evaluate_psnr
 from recon.methods.deblur_d3dgs import lowres_l1

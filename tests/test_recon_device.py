@@ -11,7 +11,7 @@ import torch
 import recon
 import recon.device
 import recon.raster
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from common.config import ConfigError
 from recon.device import DeviceError, run_placement, to_device
 from recon.raster import Camera, render

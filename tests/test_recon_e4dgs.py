@@ -8,7 +8,7 @@ import torch
 
 import recon
 from common.config import ConfigError
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon.evaluate import evaluate_psnr
 from recon.methods.e4dgs import E4DGS, E4DGSRGB
 from recon.trainer import Trainer

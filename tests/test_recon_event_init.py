@@ -81,7 +81,7 @@ def test_sample_kept_draws_only_near_kept_candidates_and_refuses_none():
 def test_events_init_puts_points_where_the_scene_is(motion_scene):
     from dataclasses import replace
 
-    from datagen.dataset import SceneDataset
+    from scene_format.reader import SceneDataset
     from recon.config import InitConfig, TrainConfig
     from recon.trainer import initial_points
 

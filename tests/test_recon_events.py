@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import recon
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon import events as ev
 from common.color_correction import correct_colors, fit_gain_offset
 from recon.event_windows import EventSource

@@ -131,7 +131,7 @@ def test_position_learning_rate_schedule():
 
 
 def test_render_at_with_an_untrained_field_equals_the_static_model():
-    from datagen.cameras import look_at_opencv
+    from scene_format.cameras import look_at_opencv
     from recon.gaussians import GaussianModel
     from recon.raster import render
     from recon.render import camera_center, camera_from_pose, render_at

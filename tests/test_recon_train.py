@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import recon
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from common.config import ConfigError
 from recon.evaluate import evaluate_psnr
 from recon.methods.d3dgs import D3DGS

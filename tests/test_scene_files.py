@@ -34,7 +34,7 @@ SAVE_BUILTIN = """
 from pathlib import Path
 import bpy
 from datagen import render as R
-from datagen.cameras import intrinsics_from_fov
+from scene_format.cameras import intrinsics_from_fov
 from datagen.config import resolve_scene
 cfg = resolve_scene("blur_plane", scene_file=Path(r"{root}") / "blender_scenes" / "blur_plane.yaml")
 R.build_scene(cfg, intrinsics_from_fov(64, 48, 50.0))

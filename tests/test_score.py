@@ -19,7 +19,7 @@ from benchmark.score import score_renders
 from benchmark.testviews import test_views as views_of
 from common.config import build_config
 from common.imageio import write_exr
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from e4dgs.cli import main as e4dgs
 from recon.cli import render_test_views
 from recon.model import load

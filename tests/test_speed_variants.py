@@ -68,7 +68,7 @@ def test_blur_of_a_sliding_board_grows_with_speed_as_solved_by_hand(tmp_path):
     same); a 1 ms shutter integrates n(s) = 3 s rendered frames at 3000 FPS * s, so its blur is
     (n(s) - 1) * p px: 2p, 5p, 11p, 23p at s = 1, 2, 4, 8."""
     from blender_scenes import blur_plane as B
-    from datagen.cameras import intrinsics_from_fov
+    from scene_format.cameras import intrinsics_from_fov
 
     yaml_path = _plane_yaml(tmp_path, "{factors: [1, 2, 4, 8], exposure_ms: 1.0}")
     r = generate(tmp_path / "out", "blur_plane", PAPER, ["--scene-config", str(yaml_path)])

@@ -70,7 +70,7 @@ def test_letterbox_centres_the_image_at_the_canvas_aspect():
 
 
 def test_nearest_frame_and_uint8_conversion():
-    from datagen.dataset import FrameRecord
+    from scene_format.reader import FrameRecord
 
     recs = [FrameRecord(0, i, t, t / 100, Path(f"{i}.png")) for i, t in enumerate([0, 10, 20])]
     assert [nearest(recs, t).index for t in (-5, 4, 5, 6, 100)] == [0, 0, 0, 1, 2]

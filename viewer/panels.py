@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datagen.dataset import FrameRecord, SceneDataset
+from scene_format.reader import FrameRecord, SceneDataset
 from simulator.event_file import EventFile
 from simulator.view import annotate, event_frame
 

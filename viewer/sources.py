@@ -10,7 +10,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from datagen.dataset import DatasetError, SceneDataset
+from scene_format.reader import DatasetError, SceneDataset
 from recon.model import DynamicGaussians, load
 
 

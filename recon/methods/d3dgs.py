@@ -12,7 +12,7 @@ from typing import Literal
 
 import torch
 
-from datagen.dataset import DatasetError, FrameRecord, SceneDataset
+from scene_format.reader import DatasetError, FrameRecord, SceneDataset
 from recon.config import TrainConfig
 from recon.device import to_device
 from recon.losses import photometric_loss

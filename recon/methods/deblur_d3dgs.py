@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import torch
 import torch.nn.functional as F
 
-from datagen.dataset import DatasetError, SceneDataset
+from scene_format.reader import DatasetError, SceneDataset
 from recon import events as ev
 from common.config import ConfigError, check_positive
 from recon.config import TrainConfig

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from e2vid.networks import Reconstructor
 from e2vid.official import load_checkpoint
 from e2vid.reconstruct import reconstruct_frames

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from datagen.dataset import SceneDataset
+from scene_format.reader import SceneDataset
 from recon import events as ev
 from common.color_correction import correct_colors
 from recon.methods.e4dgs_config import E4DGSConfig
@@ -93,7 +93,7 @@ class E4DGS(Method):
         if e.window_scale == "rate":
             lo, hi = (f * smallest for f in e.window_fraction)
         else:
-            lo, hi = e.n_events_object if dataset.config.kind == "object" else e.n_events_room
+            lo, hi = e.n_events_object if dataset.scene.kind == "object" else e.n_events_room
             ratio = dataset.intrinsics.width * dataset.intrinsics.height / PAPER_PIXELS
             lo, hi = lo * ratio, hi * ratio
         cap = max(1, int(e.max_window_fraction * smallest))

@@ -1,6 +1,8 @@
-"""Read a generated scene folder (no bpy): config, camera trajectories, frame lists, event files.
+"""Read a generated scene folder (no bpy): config, camera trajectories, frame lists, masks, event files.
 
-This is the boundary recon uses (`recon -> datagen.dataset`). Images are returned as float32 in
+This is the boundary every reader of a scene goes through (recon, benchmark, viewer); reconstruction
+reads the scene's config as a `SceneDescription`, the few facts it needs, not the generator's whole
+`SceneConfig`. Images are returned as float32 in
 [0, 1], sRGB-encoded as stored (metrics are computed on these); linear frames come from `frames/`.
 """
 from __future__ import annotations
@@ -13,12 +15,35 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from datagen.cameras import CameraTrajectory, load_cameras
-from datagen.config import SceneConfig, resolve_scene
+from scene_format.cameras import CameraTrajectory, load_cameras
+from scene_format.config import SceneConfig, read_scene_config
 
 
 class DatasetError(ValueError):
     """A scene folder is missing, incomplete or inconsistent."""
+
+
+@dataclass(frozen=True)
+class SceneDescription:
+    """What reconstruction knows of a scene besides its frames and events (from its scene.yaml)."""
+    name: str
+    kind: str                                      # "object" (cameras around it) | "room" (cameras inside)
+    background_linear: tuple[float, float, float]  # linear RGB of the empty background (colour x exposure, clipped)
+    rig_target: tuple[float, float, float]         # world point the cameras look at, metres
+    rig_radius_m: float                            # the rig's distance from the target
+    blur_levels: tuple[str, ...]                   # blur level names, weakest first
+
+    @classmethod
+    def of(cls, cfg: SceneConfig) -> "SceneDescription":
+        light = cfg.lighting
+        bg = np.clip(np.asarray(light.background, np.float64) * light.exposure, 0, 1)
+        return cls(cfg.name, cfg.kind, tuple(float(c) for c in bg), tuple(float(c) for c in cfg.camera.target),
+                   float(cfg.camera.radius), tuple(cfg.blur.levels))
+
+
+def mask_path(scene_dir: Path, camera: int, index: int) -> Path:
+    """A test view's dynamic-region mask: <scene>/dynamic/cam<k>/<index>.png (255 = dynamic)."""
+    return Path(scene_dir) / "dynamic" / f"cam{camera}" / f"{index:05d}.png"
 
 
 @dataclass(frozen=True)
@@ -56,7 +81,8 @@ class SceneDataset:
             raise DatasetError(f"{self.dir}: no manifest.json: not a generated scene, or its generation has not "
                                "finished (run `e4dgs dataset` again to resume it)")
         self.manifest = read_json(self.dir / "manifest.json")
-        self.config: SceneConfig = resolve_scene(self.manifest["scene"], scene_file=self.dir / "scene.yaml")
+        self.config: SceneConfig = read_scene_config(self.dir / "scene.yaml")
+        self.scene = SceneDescription.of(self.config)
         self.cameras: list[CameraTrajectory] = load_cameras(self.dir / "cameras.json")
         self.intrinsics = self.cameras[0].intrinsics
         self.duration_us = int(self.cameras[0].times_us[-1])
@@ -93,11 +119,11 @@ class SceneDataset:
 
     def blur_levels(self) -> list[str]:
         """Blur level names from the weakest to the strongest."""
-        return self.config.blur.levels
+        return list(self.scene.blur_levels)
 
     def blurred_frames(self, level: str) -> list[FrameRecord]:
         """Training frames of a blur level; their t_us / time is the exposure centre."""
-        if level not in self.config.blur.levels:
+        if level not in self.scene.blur_levels:
             raise DatasetError(f"{self.dir}: no blur level {level!r} (have: {', '.join(self.blur_levels()) or 'none'})")
         exposures = read_json(self.dir / "blur" / level / "exposures.json")
         spans = {(e["camera"], e["index"]): (e["first_frame_us"], e["last_frame_us"]) for e in exposures}
@@ -106,8 +132,6 @@ class SceneDataset:
     def dynamic_mask(self, rec: FrameRecord) -> np.ndarray | None:
         """bool [H, W]: the test view's pixels whose surface moves (datagen.dynamic); None when the scene
         has no masks."""
-        from datagen.dynamic import mask_path
-
         p = mask_path(self.dir, rec.camera, rec.index)
         if not (self.dir / "dynamic" / "masks.json").exists():      # written last: the masks are complete
             return None

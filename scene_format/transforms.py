@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from common.fileio import write_text_atomic
-from datagen.cameras import Intrinsics, interpolate_pose, opencv_to_blender
+from scene_format.cameras import Intrinsics, interpolate_pose, opencv_to_blender
 
 
 def frame_entry(t_us_all: np.ndarray, poses_k: np.ndarray, k: int, j: int, path: str, t_us: int) -> dict:
