@@ -96,7 +96,8 @@ def run_score(args: argparse.Namespace) -> int:
 def run_bench_cli(args: argparse.Namespace) -> int:
     from benchmark.config import load_bench
     from benchmark.report import write_report
-    from benchmark.runner import read_results, run_bench
+    from benchmark.rows import read_results
+    from benchmark.runner import run_bench
     from common.config import ConfigError
 
     try:

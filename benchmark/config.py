@@ -203,6 +203,22 @@ class Job:
                 "config_hash": self.config_hash(), "run_dir": self.folder, "label": self.label or self.cell,
                 "inputs": list(self.inputs)}
 
+    def _input_digests(self) -> dict[str, str]:
+        """The method's `input_digests` under this job's config ({} while the config is invalid: the job
+        then fails with the config's own error when it runs)."""
+        from recon.api import resolve_config
+        from recon.method import Method
+        from recon.methods import get_method
+
+        method = get_method(self.method)
+        if method.input_files.__func__ is Method.input_files.__func__:     # reads no other file: nothing to resolve
+            return {}
+        try:
+            cfg = resolve_config(self.method, str(REPO / self.config) if self.config else None, self.overrides)
+        except (ConfigError, ValueError):
+            return {}
+        return method.input_digests(cfg)
+
     def config_hash(self) -> str:
         payload = {"method": self.method, "overrides": self.overrides,
                    "config": (REPO / self.config).read_text() if self.config else ""}
@@ -210,10 +226,7 @@ class Job:
             payload["speed"] = self.speed
         if self.dataset:
             payload["dataset"] = self.dataset
-        if self.method == "e2vid_d3dgs":      # the network's weights are an input too
-            from e2vid.weights import default_weights_path
-            weights = self.overrides.get("weights") or default_weights_path()
-            payload["weights_sha256"] = hashlib.sha256(Path(weights).read_bytes()).hexdigest()
+        payload.update(self._input_digests())      # files the method reads besides its config (E2VID's weights)
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -3,14 +3,12 @@
 model, its floor and its snapshots, and the row it becomes."""
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 from benchmark.config import REPO, BenchConfig, Job
 from common import provenance
 from common.provenance import git_commit
-from common.metrics.image import score_pairs
 from scene_format.reader import SceneDataset
 
 
@@ -24,13 +22,14 @@ def job_data_dir(job: Job, data_root: Path) -> Path:
     return (data_root.parent / job.dataset if job.dataset else data_root) / job.data_scene
 
 
-def evaluate_model(method_obj, model, records, lpips_net: str | None, placement=None) -> dict:
-    """Scores of `model` on `records`, rendered on the run's (device, backend) (default: CPU, auto),
-    over the whole images and, where the scene has dynamic masks, over the moving pixels (`*_dyn`)."""
+def evaluate_model(model, scene_dir: Path, lpips_net: str | None, placement=None) -> dict:
+    """Scores of `model` on the scene's test views through `recon.evaluate`, rendered on the run's
+    (device, backend) (default: CPU, auto), over the whole images and, where the scene has dynamic
+    masks, over the moving pixels (`*_dyn`)."""
+    from recon.api import evaluate
+
     device, backend = placement or ("cpu", "auto")
-    masks = [method_obj.dataset.dynamic_mask(r) for r in records]
-    return score_pairs(method_obj.eval_pairs(model.to(device), records, backend), lpips_net=lpips_net,
-                       masks=masks if any(m is not None for m in masks) else None)
+    return evaluate(model, scene_dir, "test", lpips_net=lpips_net, backend=backend, device=device)
 
 
 DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
@@ -88,32 +87,23 @@ def wants_lpips(job: Job, cfg: BenchConfig) -> bool:
 
 
 def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool, method_cfg=None) -> dict:
-    from recon.device import run_placement
-    from recon.methods import get_method
+    """Train (or resume, or reuse the finished model of) one job through `recon.fit`, score the result,
+    its untrained floor and its snapshots through `recon.evaluate`, and make its results row."""
+    from recon.api import fit
     from recon.model import load
-    from recon.trainer import Trainer
 
     method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
     scene_dir = job_data_dir(job, data_root)
-    run_dir = out_root / job.folder
-    t0 = time.time()
-    dataset = SceneDataset(scene_dir)
-    trainer = Trainer(get_method(job.method)(dataset, method_cfg), run_dir, progress)
-    untrained = trainer.initial_model()
-    model = trainer.run()
-    train_elapsed = time.time() - t0
-    scorer = get_method(job.method).scorer(dataset, method_cfg)
-    placement = run_placement(method_cfg.train.device, method_cfg.train.backend)   # where it trained
-    records = dataset.frames("test")
+    result = fit(scene_dir, job.method, method_cfg, out_root / job.folder, progress=progress, keep_initial=True)
+    model, placement = result.model, (result.device, result.backend)       # score where it trained
     t1 = time.time()
     lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
-    final = evaluate_model(scorer, model, records, lpips_net, placement)
+    final = evaluate_model(model, scene_dir, lpips_net, placement)
     # the floor: what the method's own starting model scores after the same correction (an events-only
     # score means something about events only as far as it rises above this)
-    floor = evaluate_model(scorer, untrained, records, None, placement)
-    log_rows = [json.loads(line) for line in (run_dir / "log.jsonl").read_text().splitlines()]
+    floor = evaluate_model(result.initial, scene_dir, None, placement)
     snapshots = []
-    for row in log_rows:
+    for row in result.log:
         if "snapshot" not in row:
             continue
         if row["iteration"] == model.meta.iteration:
@@ -121,19 +111,18 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         elif not scores_snapshots(job):      # the tables plot the main study's curves only: the others keep
             continue                         # their training log's test PSNR (log.jsonl), not re-rendered
         else:
-            snap = load(run_dir / row["snapshot"])
-            s = evaluate_model(scorer, snap, records, None, placement)
+            s = evaluate_model(load(result.run_dir / row["snapshot"]), scene_dir, None, placement)
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
         **job.identity(), **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
         **{k: final[k] for k in DYN_KEYS if k in final},
         "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"],
-        **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}), "data": data_stats(dataset),
-        "n_test_images": final["n_images"],
-        "iterations": model.meta.iteration, "n_gaussians": len(model), "channels": scorer.channels(),
-        "device": str(placement[0]), "backend": placement[1],
-        "wall_s": log_rows[-1]["wall_s"], "train_elapsed_s": round(train_elapsed, 1),
+        **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}),
+        "data": data_stats(SceneDataset(scene_dir)), "n_test_images": final["n_images"],
+        "iterations": result.iterations, "n_gaussians": len(model), "channels": model.meta.channels,
+        "device": result.device, "backend": result.backend,
+        "wall_s": result.train_s, "train_elapsed_s": round(result.elapsed_s, 1),
         "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
         "versions": versions(), "git_commit": git_commit(), "lpips_net": lpips_net,
     }

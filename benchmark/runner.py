@@ -20,24 +20,8 @@ from typing import Callable
 
 from benchmark.config import BenchConfig, Job, dump, jobs  # noqa: F401 - jobs: the grid, for callers
 from benchmark.job_run import complete_row, resolve_job, reused_row, row_summary, run_job
+from benchmark.rows import read_results, write_results  # noqa: F401 - read_results: for callers
 from common.fileio import write_text_atomic
-
-
-def read_results(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    rows = []
-    for n, line in enumerate(path.read_text().splitlines(), 1):
-        if line.strip():
-            try:
-                rows.append(json.loads(line))
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"{path}:{n}: not a JSON row ({exc.msg})") from None
-    return rows
-
-
-def write_results(path: Path, rows: list[dict]) -> None:
-    write_text_atomic(path, "".join(json.dumps(r, sort_keys=True) + "\n" for r in rows))
 
 
 def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callable[[str], None], ray=None) -> None:

@@ -232,7 +232,7 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
 def append_rows(results: Path, new_rows: list[dict], cells: tuple[str, ...] = ()) -> list[dict]:
     """results.jsonl with `new_rows` added (a row with the same key replaced), written atomically;
     refuses a name that is one of the preset's own cells."""
-    from benchmark.runner import read_results, write_results
+    from benchmark.rows import read_results, write_results
 
     clash = sorted({r["cell"] for r in new_rows} & set(cells))
     if clash:

@@ -1,4 +1,4 @@
-"""Dynamic scene reconstruction: `fit` a registered method, `load` a model, `model.render(camera, t)`,
+"""Dynamic scene reconstruction: `fit` a registered method (a `TrainResult`), `load` a model, `model.render(camera, t)`,
 `evaluate` it on a scene's held-out views."""
-from recon.api import evaluate, fit, load, resolve_config  # noqa: F401
+from recon.api import TrainResult, evaluate, fit, load, resolve_config  # noqa: F401
 from recon.methods import get_method, method_names  # noqa: F401

@@ -1,12 +1,15 @@
 """The reconstruction API: `fit` a registered method on a generated scene, `load` a trained model.
 
-    model = recon.fit("data/quick/lego", method="d3dgs", config="configs/recon/d3dgs_quick.yaml",
-                      out_dir="runs/lego/d3dgs")
-    image = model.render(camera, t)
-    scores = recon.evaluate(model, "data/quick/lego")     # {psnr, ssim[, lpips], n_images} on the test views
+    result = recon.fit("data/quick/lego", method="d3dgs", config="configs/recon/d3dgs_quick.yaml",
+                       out_dir="runs/lego/d3dgs")       # a TrainResult: .model, .run_dir, .log, .train_s, ...
+    image = result.model.render(camera, t)
+    scores = recon.evaluate(result.model, "data/quick/lego")   # {psnr, ssim[, lpips], n_images} on the test views
 """
 from __future__ import annotations
 
+import json
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -25,29 +28,69 @@ def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any]
     return build_config(get_method(method).config_cls, config, overrides, overrides_source)
 
 
+@dataclass(frozen=True)
+class TrainResult:
+    """What `fit` returns: the trained model and where, how and how long it was trained."""
+    model: DynamicGaussians
+    method: str
+    run_dir: Path                 # the training folder (run.json, log.jsonl, snapshots/, model.pt)
+    fingerprint: str              # the run's identity: method, resolved config, its inputs, the scene's manifest
+    log: tuple[dict, ...]         # the rows of log.jsonl, oldest first
+    device: str                   # where it trained ("cpu", "cuda:0")
+    backend: str                  # the rasterizer it trained with (cpu, torch, gsplat)
+    train_s: float                # training wall-clock seconds, summed over resumes, evaluation excluded
+    elapsed_s: float              # this call's seconds (set-up, resume or reuse of a finished run included)
+    initial: DynamicGaussians | None = field(default=None, repr=False)   # the untrained model, when asked for
+
+    @property
+    def iterations(self) -> int:
+        return self.model.meta.iteration
+
+    @property
+    def last_test_psnr(self) -> tuple[float, str] | None:
+        """(test PSNR in dB, what it compares: rgb, or gray after the gain/offset fit) of the last
+        evaluation in the log; None when the log has none."""
+        evals = [r for r in self.log if "test_psnr" in r]
+        return (evals[-1]["test_psnr"], evals[-1].get("test_psnr_on", "rgb")) if evals else None
+
+
 def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_dir: str | Path | None = None,
         overrides: Mapping[str, Any] | None = None, progress: bool = True,
-        on_iteration: Callable | None = None) -> DynamicGaussians:
+        on_iteration: Callable | None = None, keep_initial: bool = False) -> TrainResult:
     """Train `method` on the scene at `scene_dir`; resumes a killed run in `out_dir`, and returns the
-    finished model directly if `out_dir` already holds it. out_dir defaults to runs/<scene>/<method>."""
+    finished model directly if `out_dir` already holds it. out_dir defaults to runs/<scene>/<method>.
+    `keep_initial` also returns the untrained model the run starts from (the benchmark's floor)."""
+    t0 = time.time()
     dataset = SceneDataset(scene_dir)
     cfg = resolve_config(method, config, overrides)
     out = Path(out_dir) if out_dir is not None else Path("runs") / dataset.dir.name / method
     if out_dir is None and (out / "model.pt").exists():
         print(f"fit: {out} holds a finished {method} model of this scene: it is returned as it is "
               "(give out_dir for a new run)")
-    return Trainer(get_method(method)(dataset, cfg), out, progress, on_iteration).run()
+    trainer = Trainer(get_method(method)(dataset, cfg), out, progress, on_iteration)
+    initial = trainer.initial_model() if keep_initial else None
+    model = trainer.run()
+    log = tuple(json.loads(line) for line in (out / "log.jsonl").read_text().splitlines())
+    return TrainResult(model=model, method=method, run_dir=out, fingerprint=trainer.fingerprint, log=log,
+                       device=str(trainer.device), backend=trainer.backend,
+                       train_s=float(log[-1]["wall_s"]) if log else 0.0, elapsed_s=time.time() - t0, initial=initial)
 
 
 def evaluate(model: DynamicGaussians, scene_dir: str | Path, split: str = "test", lpips_net: str | None = None,
-             backend: str = "auto") -> dict:
+             backend: str = "auto", device: str | None = None, dynamic: bool = True) -> dict:
     """Scores of a trained model on a scene's held-out views, the way the benchmark scores them: the
     model's own method and config (stored in it) pick the channels and the correction (E-4DGS's
-    log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net)."""
+    log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net); where the
+    scene has dynamic-region masks (and `dynamic`), the same over the moving pixels (`*_dyn`).
+    Rendered on `device` (default: where the model is) with `backend`."""
     from common.metrics.image import score_pairs
 
     dataset = SceneDataset(scene_dir)
     method = get_method(model.meta.method)
     cfg = resolve_config(model.meta.method, model.meta.config or None)
-    pairs = method.scorer(dataset, cfg).eval_pairs(model, dataset.frames(split), backend)
-    return score_pairs(pairs, lpips_net=lpips_net)
+    records = dataset.frames(split)
+    masks = [dataset.dynamic_mask(r) for r in records] if dynamic else []
+    if device is not None:
+        model = model.to(device)
+    pairs = method.scorer(dataset, cfg).eval_pairs(model, records, backend)
+    return score_pairs(pairs, lpips_net=lpips_net, masks=masks if any(m is not None for m in masks) else None)

@@ -29,16 +29,14 @@ def run_train(args: argparse.Namespace) -> int:
     from recon.trainer import TrainingError
 
     try:
-        model = fit(args.scene, args.method, args.config, args.out, parse_set(args.overrides),
-                    progress=not args.no_progress)
+        result = fit(args.scene, args.method, args.config, args.out, parse_set(args.overrides),
+                     progress=not args.no_progress)
     except (ConfigError, DatasetError, TrainingError, FileNotFoundError, ValueError) as exc:
         raise SystemExit(f"error: {exc}") from None
-    out = args.out or Path("runs") / args.scene.name / args.method
-    log = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
-    evals = [r for r in log if "test_psnr" in r]
-    last = f", test PSNR {evals[-1]['test_psnr']:.2f} dB" if evals else ""
+    model, psnr = result.model, result.last_test_psnr
+    last = f", test PSNR {psnr[0]:.2f} dB" if psnr else ""
     print(f"train: {args.method} on {args.scene.name}: {model.meta.iteration} iterations, {len(model)} Gaussians"
-          f"{last}, {log[-1]['wall_s']:.0f} s of training -> {out / 'model.pt'}")
+          f"{last}, {result.train_s:.0f} s of training -> {result.run_dir / 'model.pt'}")
     return 0
 
 

@@ -125,7 +125,7 @@ class GaussianModel(nn.Module):
 
     def split_selected(self, mask: torch.Tensor, n: int = 2, optimizer=None, generator=None) -> None:
         """Replace each selected Gaussian by n children sampled from it, scales / (0.8 n)."""
-        from recon.raster.projection import quat_to_rotmat
+        from recon.raster.project_ref import quat_to_rotmat
 
         idx = torch.nonzero(mask).squeeze(1)
         with torch.no_grad():

@@ -3,6 +3,9 @@ scoring needs (recon.scoring.Scorer): subclass `Method` and `@register` it. Trai
 `StepContext` (what they may use of the trainer), so this file does not import the trainer."""
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -46,6 +49,18 @@ class Method:
     def correction(cls, cfg: Any) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
         """What is applied to a prediction before it is scored (None: nothing; E-4DGS: colour correction)."""
         return None
+
+    @classmethod
+    def input_files(cls, cfg: Any) -> dict[str, Path]:
+        """Files outside the config and the scene that the trained model depends on (E2VID + D3DGS: the
+        network's weights); their contents are part of a benchmark run's identity (`input_digests`)."""
+        return {}
+
+    @classmethod
+    def input_digests(cls, cfg: Any) -> dict[str, str]:
+        """{"<name>_sha256": hex digest} of each of `input_files`."""
+        return {f"{name}_sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()
+                for name, path in sorted(cls.input_files(cfg).items())}
 
     @classmethod
     def scorer(cls, dataset: SceneDataset, cfg: Any) -> Scorer:

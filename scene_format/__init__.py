@@ -7,3 +7,4 @@
     transforms.py  the D-NeRF style frame lists (transforms_*.json)
     verify.py      `e4dgs check`: every file against the manifest
 """
+from scene_format.reader import DatasetError, FrameRecord, SceneDataset, SceneDescription  # noqa: F401

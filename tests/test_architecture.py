@@ -70,7 +70,7 @@ def test_only_the_render_packages_import_bpy():
 
 
 def test_only_the_task_pool_imports_ray():
-    assert _importers_of("ray") == {"common/taskpool.py"}     # and only inside a function (tests/test_ray.py)
+    assert _importers_of("ray") == {"common/taskpool.py"}     # and only inside a function (tests/benchmark/test_ray.py)
 
 
 def module_graph() -> dict[str, set[str]]:
@@ -150,3 +150,10 @@ def test_the_circle_finder_finds_a_circle():
 
 def test_no_two_files_import_each_other_even_indirectly():
     assert import_circles(module_graph()) == []
+
+
+def test_the_tests_mirror_the_packages():
+    """tests/<package>/ holds the tests of one package (tests/e4dgs/: the command line, end to end)."""
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and not p.name.startswith((".", "__"))}
+    assert folders and folders <= set(LAYERS), sorted(folders - set(LAYERS))
+    assert sorted(p.name for p in (ROOT / "tests").glob("test_*.py")) == ["test_architecture.py"]

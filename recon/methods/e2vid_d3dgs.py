@@ -9,6 +9,7 @@ are scored after the same colour correction (`color_correct`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -60,6 +61,10 @@ class E2VIDD3DGS(D3DGS):
     @classmethod
     def channels_of(cls, cfg: E2VIDD3DGSConfig) -> int:
         return 1
+
+    @classmethod
+    def input_files(cls, cfg: E2VIDD3DGSConfig) -> dict[str, Path]:
+        return {"weights": Path(cfg.weights or default_weights_path())}
 
     def training_records(self):
         return self.dataset.frames("train")

@@ -6,13 +6,18 @@ Backends: "torch" (readable tile-binned PyTorch reference, autograd, any device)
 Gaussian against every pixel; a test oracle), "cpu" (compiled numba kernels with hand-written
 backward; what "auto" picks for CPU tensors), "gsplat" (CUDA; what "auto" picks for CUDA tensors
 when gsplat is installed). The camera follows the Gaussians' device and dtype. Conventions are in `types.py` and
-`projection.py`: quaternions (w, x, y, z), linear scales, opacities in [0, 1], OpenCV cameras.
+`project_ref.py`: quaternions (w, x, y, z), linear scales, opacities in [0, 1], OpenCV cameras.
+
+The readable reference and the fast CPU implementation pair by name, as the simulator's kernels do
+(`kernel_ref.emit_events_ref` / `kernels.emit_events`), and are tested against each other forward
+and backward: `project_ref.project_ref` / `cpu.project_cpu`, `rasterize_ref.rasterize_ref` /
+`cpu.rasterize_cpu` (`rasterize_ref.rasterize_dense_ref`: every Gaussian at every pixel, the oracle).
 """
 from __future__ import annotations
 
 import torch
 
-from recon.raster.projection import project
+from recon.raster.project_ref import project_ref
 from recon.raster.types import Camera, RenderOutput
 
 BACKENDS = ("torch", "dense", "cpu", "gsplat")
@@ -75,10 +80,10 @@ def render(means, quats, scales, opacities, colors, camera: Camera, background, 
         means2d, conics, depths, radii = project_cpu(means, quats, scales, camera)
         raster = rasterize_cpu
     else:
-        from recon.raster.ref import rasterize_dense, rasterize_tiles
+        from recon.raster.rasterize_ref import rasterize_dense_ref, rasterize_ref
 
-        means2d, conics, depths, radii = project(means, quats, scales, camera)
-        raster = rasterize_tiles if backend == "torch" else rasterize_dense
+        means2d, conics, depths, radii = project_ref(means, quats, scales, camera)
+        raster = rasterize_ref if backend == "torch" else rasterize_dense_ref
     image, alpha, depth, max_w = raster(means2d, conics, depths, radii, opacities, colors, background,
                                         camera.width, camera.height)
     return RenderOutput(image, alpha, depth, radii, means2d, max_w)

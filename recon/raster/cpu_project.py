@@ -1,4 +1,4 @@
-"""Numba kernels of the EWA projection, forward and hand-written backward (see projection.py).
+"""Numba kernels of the EWA projection, forward and hand-written backward (see project_ref.py).
 
 Written with scalars only: no per-Gaussian arrays or small matrix products (numba would allocate
 them and call BLAS), so one Gaussian costs a few hundred flops.
@@ -10,7 +10,7 @@ import math
 import numba
 import numpy as np
 
-from recon.raster.projection import QUAT_EPS
+from recon.raster.project_ref import QUAT_EPS
 from recon.raster.types import LOWPASS, NEAR_PLANE
 
 _opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")

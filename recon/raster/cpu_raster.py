@@ -1,6 +1,6 @@
 """Numba kernels of the tile-binned rasterizer, forward and hand-written backward.
 
-Same semantics as `ref.py` (per-pixel footprint square, alpha skip and cap, stop before T < 1e-4),
+Same semantics as `rasterize_ref.py` (per-pixel footprint square, alpha skip and cap, stop before T < 1e-4),
 organised for speed:
 - one global depth sort; tile lists are filled in that order (no per-tile sort);
 - each Gaussian's pixel box is the footprint square cut to the bounding box of the ellipse where

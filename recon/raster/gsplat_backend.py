@@ -14,7 +14,7 @@ use). It calls gsplat's stages itself rather than `gsplat.rasterization`, for tw
 
 `max_weight` (each Gaussian's largest alpha x transmittance, which intensity-importance pruning
 reads) is not reported by gsplat. It is computed on first use, without gradient, by the readable
-torch reference (`ref.rasterize_tiles` on the same device, from `projection.project`), so it equals
+torch reference (`rasterize_ref.rasterize_ref` on the same device, from `project_ref.project_ref`), so it equals
 the cpu backend's to float rounding; training steps that never read it pay nothing.
 
 Same conventions as the other backends (OpenCV world_to_cam, pixel centres at +0.5, 0.3 px^2
@@ -53,12 +53,12 @@ def render_gsplat(means, quats, scales, opacities, colors, camera: Camera, backg
     r = r.max(dim=-1).values if r.ndim == 2 else r   # gsplat >= 1.5 reports x and y radii
 
     def max_weight() -> torch.Tensor:
-        from recon.raster.projection import project
-        from recon.raster.ref import rasterize_tiles
+        from recon.raster.project_ref import project_ref
+        from recon.raster.rasterize_ref import rasterize_ref
 
         with torch.no_grad():
-            m, cn, d, rr = project(means.detach(), quats.detach(), scales.detach(), camera)
-            return rasterize_tiles(m, cn, d, rr, opacities.detach(), colors.detach()[:, :1],
+            m, cn, d, rr = project_ref(means.detach(), quats.detach(), scales.detach(), camera)
+            return rasterize_ref(m, cn, d, rr, opacities.detach(), colors.detach()[:, :1],
                                    background.detach()[:1], W, H)[3]
 
     return RenderOutput(image, alpha, depth, r.to(torch.int32), means2d, max_weight)

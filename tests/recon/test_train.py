@@ -18,7 +18,7 @@ from recon.render import camera_from_pose
 from recon.trainer import TrainingError
 from recon.views import record_camera
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 # a small, fast D3DGS: the public schedule scaled to the budget (warm-up at its 200-iteration floor),
 # colour learning rate 4x the public one (random init starts grey; see configs/recon/d3dgs_quick.yaml)
@@ -41,9 +41,9 @@ def psnr_on(model, dataset, split):
 def trained(motion_scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("d3dgs")
     dyn = recon.fit(motion_scene, "d3dgs", overrides={**FAST, "train.iterations": OVERFIT_ITERS},
-                    out_dir=out / "dynamic", progress=False)
+                    out_dir=out / "dynamic", progress=False).model
     static = recon.fit(motion_scene, "d3dgs", overrides={**FAST, "train.iterations": OVERFIT_ITERS, "train.deform": False},
-                       out_dir=out / "static", progress=False)
+                       out_dir=out / "static", progress=False).model
     return {"dynamic": dyn, "static": static, "out": out}
 
 
@@ -85,7 +85,7 @@ def test_save_then_load_renders_identical_images(trained, tmp_path):
 def test_finished_run_is_reused_and_a_different_config_is_refused(trained, motion_scene):
     out = trained["out"] / "dynamic"
     again = recon.fit(motion_scene, "d3dgs", overrides={**FAST, "train.iterations": OVERFIT_ITERS}, out_dir=out,
-                      progress=False)
+                      progress=False).model
     assert torch.equal(again.gaussians.means, trained["dynamic"].gaussians.means)
     with pytest.raises(TrainingError, match="different run"):
         recon.fit(motion_scene, "d3dgs", overrides={**FAST, "train.iterations": 5}, out_dir=out, progress=False)
@@ -97,7 +97,7 @@ class Killed(Exception):
 
 def test_resume_continues_the_same_run(motion_scene, tmp_path):
     cfg = {**FAST, "train.iterations": 260, "train.checkpoint_every": 100, "train.init.n_points_object": 500}
-    whole = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "whole", progress=False)
+    whole = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "whole", progress=False).model
 
     def kill_at_230(trainer, it):
         if it == 230:
@@ -109,7 +109,7 @@ def test_resume_continues_the_same_run(motion_scene, tmp_path):
     assert (tmp_path / "resumed" / "checkpoint.pt").exists() and not (tmp_path / "resumed" / "model.pt").exists()
     seen = []
     resumed = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "resumed", progress=False,
-                        on_iteration=lambda tr, it: seen.append(it))
+                        on_iteration=lambda tr, it: seen.append(it)).model
     assert seen[0] == 201 and seen[-1] == 260      # from the checkpoint at 200, warm-up (200) passed
     for name, p in whole.gaussians.named_parameters():
         torch.testing.assert_close(getattr(resumed.gaussians, name), p, rtol=1e-5, atol=1e-6, msg=name)
@@ -249,3 +249,21 @@ def test_evaluate_scores_a_model_as_its_training_log_does(trained, motion_scene)
     scores = recon.evaluate(recon.load(trained["out"] / "dynamic"), motion_scene)
     assert scores["n_images"] == len(SceneDataset(motion_scene).frames("test"))
     assert scores["psnr"] == pytest.approx(log[-1]["test_psnr"], abs=0.01) and 0 < scores["ssim"] <= 1
+
+
+def test_fit_returns_a_typed_result_that_matches_its_folder(motion_scene, tmp_path):
+    """The TrainResult holds what the folder holds (log rows, training seconds, fingerprint) and the
+    untrained model the run started from, bit for bit the trainer's own initial model."""
+    cfg = {**FAST, "train.iterations": 3, "train.scale_schedule": False, "train.init.n_points_object": 100,
+           "train.densify.enabled": False}
+    result = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "r", progress=False, keep_initial=True)
+    assert isinstance(result, recon.TrainResult) and result.run_dir == tmp_path / "r"
+    log = [json.loads(line) for line in (tmp_path / "r" / "log.jsonl").read_text().splitlines()]
+    assert list(result.log) == log and result.train_s == log[-1]["wall_s"] and result.iterations == 3
+    assert result.fingerprint == json.loads((tmp_path / "r" / "run.json").read_text())["fingerprint"]
+    assert (result.device, result.backend) == ("cpu", "cpu") and result.elapsed_s >= result.train_s > 0
+    assert result.initial.meta.iteration == 0 and len(result.initial) == len(result.model) == 100
+    assert not torch.equal(result.initial.gaussians.means, result.model.gaussians.means)   # trained, not the start
+    again = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "r", progress=False, keep_initial=True)
+    assert torch.equal(again.initial.gaussians.means, result.initial.gaussians.means)      # deterministic start
+    assert torch.equal(again.model.gaussians.means, result.model.gaussians.means) and again.initial is not None

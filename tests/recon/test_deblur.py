@@ -60,9 +60,9 @@ SHARPER_BY = 0.01
 
 def test_blur_model_recovers_sharper_held_out_frames_than_d3dgs(pan_scene, tmp_path):
     ds = SceneDataset(pan_scene)
-    d3 = recon.fit(pan_scene, "d3dgs", overrides=TRAIN, out_dir=tmp_path / "d3", progress=False)
+    d3 = recon.fit(pan_scene, "d3dgs", overrides=TRAIN, out_dir=tmp_path / "d3", progress=False).model
     de = recon.fit(pan_scene, "deblur_d3dgs", overrides={**TRAIN, "blur_samples": 3}, out_dir=tmp_path / "de",
-                   progress=False)
+                   progress=False).model
     scorer = recon.get_method("d3dgs")(ds, recon.resolve_config("d3dgs"))
     psnr_d3 = evaluate_psnr(scorer.eval_pairs(d3, ds.frames("test")))
     psnr_de = evaluate_psnr(scorer.eval_pairs(de, ds.frames("test")))

@@ -204,15 +204,15 @@ def test_footprint_boxes_hold_every_pixel_alpha_reaches_and_are_tight():
     the square, its edge columns / rows meet the ellipse d^T Q d <= k = 2 log(o / (1/255)) (whose
     smallest value over a column at offset dx is dx^2 det(Q) / Q_yy) and the next ones out do not."""
     from recon.raster.cpu_raster import footprints
-    from recon.raster.projection import project
-    from recon.raster.ref import gaussian_alphas
+    from recon.raster.project_ref import project_ref
+    from recon.raster.rasterize_ref import gaussian_alphas
     from recon.raster.types import ALPHA_MIN
 
     n, w, h = 150, 64, 48
     params, _ = scene(n, 1, seed=11, scale=(0.02, 0.12))
     params[3] = torch.rand(n, generator=torch.Generator().manual_seed(3), dtype=torch.float64) ** 3 * 0.99
     cam = camera(w, h, f=60.0, seed=11)
-    means2d, conics, _, radii = project(*params[:3], cam)
+    means2d, conics, _, radii = project_ref(*params[:3], cam)
     boxes, _ = footprints(means2d.numpy(), conics.numpy(), radii.numpy().astype(np.int32), params[3].numpy(), w, h)
     vv, uu = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
     px = torch.stack([uu.reshape(-1) + 0.5, vv.reshape(-1) + 0.5], -1)

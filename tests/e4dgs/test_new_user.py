@@ -17,9 +17,9 @@ import pytest
 
 from common.imageio import write_exr
 from e4dgs.cli import main
-from tests.test_cli import grating_frames
+from tests.e4dgs.test_cli import grating_frames
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def cli(argv: list[str], capsys) -> tuple[int, str]:
@@ -327,7 +327,7 @@ def test_api_misuse_says_what_was_expected(motion_scene, tmp_path):
 
     model = fit(motion_scene, "d3dgs", out_dir=tmp_path / "m", progress=False,
                 overrides={"train.iterations": 2, "train.scale_schedule": False, "train.densify.enabled": False,
-                           "train.init.n_points_object": 50, "train.snapshots": []})
+                           "train.init.n_points_object": 50, "train.snapshots": []}).model
     for t, words in ((np.array([0.1, 0.2]), "of shape (2,)"), ("half", "got str 'half'")):
         with pytest.raises(ValueError, match=r"time: expected one number in \[0, 1\]") as info:
             model.render(0, t)

@@ -19,7 +19,7 @@ from simulator.events import validate_events
 from simulator.h5io import read_events, read_info
 from simulator.pixel import linear_to_srgb
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def generate(out, scene="cubes", preset="tiny", extra=(), **kw):

@@ -29,7 +29,7 @@ def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
     ], -2)
 
 
-def project(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, camera: Camera):
+def project_ref(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, camera: Camera):
     """-> means2d [N,2], conics [N,3] (a, b, c of [[a,b],[b,c]]), depths [N], radii [N] (int32).
 
     Culled Gaussians get radius 0 (their other outputs are finite but meaningless).

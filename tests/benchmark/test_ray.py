@@ -21,7 +21,7 @@ from benchmark.runner import read_results, run_bench
 from common.config import build_config
 from common.taskpool import RayOptions, TaskSpec, run_tasks
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TINY = {"train.iterations": 12, "train.scale_schedule": False, "train.warm_up": 200,
         "train.densify.enabled": False, "train.init.n_points_object": 300, "train.checkpoint_every": 5,
         "train.snapshots": [0.5, 1.0]}

@@ -37,7 +37,7 @@ def test_events_only_training_recovers_held_out_frames(motion_scene, tmp_path):
     before = evaluate_psnr(untrained.method.eval_pairs(untrained.model, ds.frames("test")))
     model = recon.fit(motion_scene, "e4dgs", overrides={**SMALL, "train.iterations": TRAIN_ITERS,
                                                         "train.densify.enabled": False},
-                      out_dir=tmp_path / "run", progress=False)
+                      out_dir=tmp_path / "run", progress=False).model
     method = E4DGS(ds, recon.resolve_config("e4dgs"))
     after = evaluate_psnr(method.eval_pairs(model, ds.frames("test")))
     assert model.meta.channels == 1 and model.meta.method == "e4dgs"

@@ -371,7 +371,7 @@ def test_e2vid_d3dgs_end_to_end_on_the_tiny_dataset(motion_scene, tmp_path):
     assert frames[-1].std() > 0.01                     # the last frame shows structure, not a flat grey
     model = recon.fit(motion_scene, "e2vid_d3dgs", overrides={
         "train.iterations": 30, "train.scale_schedule": False, "train.warm_up": 200, "train.densify.enabled": False,
-        "train.init.n_points_object": 500}, out_dir=tmp_path / "run", progress=False)
+        "train.init.n_points_object": 500}, out_dir=tmp_path / "run", progress=False).model
     assert model.meta.iteration == 30 and model.meta.channels == 1
     method = E2VIDD3DGS.scorer(ds, recon.resolve_config("e2vid_d3dgs"))
     pairs = method.eval_pairs(model, ds.frames("test")[:3])

@@ -18,7 +18,7 @@ from e4dgs.cli import main
 from common.imageio import write_exr
 from simulator import SimulatorConfig, simulate
 from simulator.h5io import write_events
-from tests.test_cli import grating_frames
+from tests.e4dgs.test_cli import grating_frames
 
 
 @pytest.fixture(scope="module")

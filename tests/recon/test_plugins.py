@@ -11,7 +11,7 @@ import pytest
 
 import recon.methods as registry
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "plugin_method"
 TINY = {"train.iterations": 10, "train.scale_schedule": False, "train.warm_up": 200, "train.densify.enabled": False,
         "train.init.n_points_object": 200, "train.snapshots": [1.0]}

@@ -79,7 +79,7 @@ def test_dump_then_load_round_trip(tmp_path):
 def test_shipped_simulator_configs_load():
     from pathlib import Path
 
-    files = sorted((Path(__file__).parent.parent / "configs").glob("sim_*.yaml"))
+    files = sorted((Path(__file__).resolve().parents[2] / "configs").glob("sim_*.yaml"))
     assert len(files) >= 2
     for f in files:
         load_config(SimulatorConfig, f)

@@ -15,7 +15,7 @@ from common.metrics.lpips import lpips_with_region
 from scene_format.cameras import intrinsics_from_fov, look_at_opencv
 from datagen.dynamic import THRESHOLD_PX, mask_image, surface_motion_px
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FPS = 3000.0
 
 

@@ -19,7 +19,7 @@ from viewer.geometry import (browser_intrinsics, fov_y_of, letterbox, matrix_to_
 from viewer.headless import chromium_path
 from viewer.panels import nearest, to_uint8_rgb
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TRAIN = {"train.iterations": 8, "train.scale_schedule": False, "train.warm_up": 3, "train.densify.enabled": False,
          "train.init.n_points_object": 400, "train.checkpoint_every": 8, "train.snapshots": []}
 

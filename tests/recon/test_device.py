@@ -16,7 +16,7 @@ from common.config import ConfigError
 from recon.device import DeviceError, run_placement, to_device
 from recon.raster import Camera, render
 from recon.trainer import Trainer
-from tests.test_raster import camera, scene
+from tests.recon.test_raster import camera, scene
 
 CPU = torch.device("cpu")
 
@@ -103,13 +103,13 @@ def gsplat_stand_in() -> types.ModuleType:
     rasterizer (shapes as gsplat 1.5: a leading camera axis, x/y radii). The tile lists are replaced
     by what the reference needs: isect_tiles passes the radii on as 'offsets' and the detached depths
     as 'flatten_ids'."""
-    from recon.raster.projection import project
-    from recon.raster.ref import rasterize_tiles
+    from recon.raster.project_ref import project_ref
+    from recon.raster.rasterize_ref import rasterize_ref
 
     def fully_fused_projection(means, covars, quats, scales, viewmats, Ks, width, height, eps2d, near_plane,
                                packed):
         assert covars is None and not packed and viewmats.shape == (1, 4, 4) and Ks.shape == (1, 3, 3)
-        m2d, conics, depths, radii = project(means, quats, scales, Camera(Ks[0], viewmats[0], width, height))
+        m2d, conics, depths, radii = project_ref(means, quats, scales, Camera(Ks[0], viewmats[0], width, height))
         return radii[None, :, None].expand(1, -1, 2).contiguous(), m2d[None], depths[None], conics[None], None
 
     def isect_tiles(means2d, radii, depths, tile_size, tiles_w, tiles_h):
@@ -121,7 +121,7 @@ def gsplat_stand_in() -> types.ModuleType:
 
     def rasterize_to_pixels(means2d, conics, colors, opacities, width, height, tile_size, offsets, flatten_ids):
         bg = torch.zeros(colors.shape[-1], dtype=colors.dtype)
-        image, alpha, _, _ = rasterize_tiles(means2d[0], conics[0], flatten_ids, offsets, opacities[0], colors[0],
+        image, alpha, _, _ = rasterize_ref(means2d[0], conics[0], flatten_ids, offsets, opacities[0], colors[0],
                                              bg, width, height)
         return image[None], alpha[None, ..., None]
 

@@ -345,3 +345,42 @@ def test_the_blur_study_sets_the_level_through_each_methods_own_field(motion_sce
     blur = {j.cell: j.overrides for j in jobs(_tiny_bench(motion_scene)) if j.study == "blur" and j.variant == "mild"}
     assert blur["d3dgs_blur"]["frames"] == "mild" and blur["deblur_d3dgs"]["frames"] == "mild"
     assert "e4dgs" not in blur                                # events only: one run stands for every level
+
+
+def test_a_method_s_input_files_are_part_of_its_run_folder(tmp_path):
+    """E2VID + D3DGS's weights are an input (Method.input_files): other weights, another folder; the
+    digest is the file's, under the key the folder hash always used."""
+    from e2vid.weights import default_weights_path
+    from recon.methods import get_method
+
+    other = tmp_path / "other.pt"
+    other.write_bytes(default_weights_path().read_bytes() + b"\0")
+    cells = {"e2vid_d3dgs": CellSpec("e2vid_d3dgs"), "e2vid_other": CellSpec("e2vid_d3dgs", overrides={"weights": str(other)}),
+             "e4dgs": CellSpec("e4dgs")}
+    by = {j.cell: j for j in jobs(build_config(BenchConfig, {"scenes": ["s"], "cells": cells}))}
+    assert by["e2vid_d3dgs"].folder != by["e2vid_other"].folder
+    assert by["e2vid_d3dgs"]._input_digests() == {
+        "weights_sha256": __import__("hashlib").sha256(default_weights_path().read_bytes()).hexdigest()}
+    assert by["e4dgs"]._input_digests() == {} and get_method("d3dgs").input_digests(None) == {}
+
+
+def test_results_rows_are_typed_where_they_are_read_and_written(tmp_path):
+    from benchmark.rows import read_results, write_results
+
+    good = _row("main", "s", "d3dgs_sharp", 20.0)
+    path = tmp_path / "results.jsonl"
+    write_results(path, [good, {**_row("main", "s", "e4dgs", 0.0), "status": "failed", "error": "x"}])
+    assert [r["key"] for r in read_results(path)] == ["main/s/d3dgs_sharp", "main/s/e4dgs"]
+    for bad, words in (({**good, "psnr": "21.3"}, r":1: psnr: expected a number, got '21.3'"),
+                       ({**good, "iterations": 1.5}, r":1: iterations: expected a number or null, got 1.5"),
+                       ({**good, "psnr": True}, r":1: psnr: expected a number, got True"),
+                       ({k: v for k, v in good.items() if k != "ssim"}, r":1: missing ssim"),
+                       ({**good, "snapshots": [{"iteration": 5, "psnr": None}]}, r"snapshots\[0\]: psnr: expected a number"),
+                       ([1, 2], r":1: expected a JSON object")):
+        path.write_text(json.dumps(bad) + "\n")
+        with pytest.raises(ValueError, match=words):
+            read_results(path)
+    path.write_text(json.dumps(good) + "\n")
+    with pytest.raises(ValueError, match=r"row 2 to write \(main/s/d3dgs_blur\): psnr"):
+        write_results(path, [good, {**_row("main", "s", "d3dgs_blur", 1.0), "psnr": float("nan")}])
+    assert json.loads(path.read_text()) == good          # nothing written when a row is wrong

@@ -12,7 +12,7 @@ import recon
 from scene_format.reader import SceneDataset
 from recon.raster import render
 from recon.trainer import Trainer
-from tests.test_raster import camera, scene
+from tests.recon.test_raster import camera, scene
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available() or not recon.raster.gsplat_available(),
                                 reason="needs CUDA and gsplat")

@@ -53,7 +53,7 @@ def _pixel_centres(x0, x1, y0, y1, dtype, device):
     return torch.stack([xs.reshape(-1) + 0.5, ys.reshape(-1) + 0.5], -1)
 
 
-def rasterize_dense(means2d, conics, depths, radii, opacities, colors, background, width, height):
+def rasterize_dense_ref(means2d, conics, depths, radii, opacities, colors, background, width, height):
     """Every Gaussian against every pixel (small scenes only): the ground truth for the others."""
     order = torch.argsort(depths, stable=True)
     px = _pixel_centres(0, width, 0, height, means2d.dtype, means2d.device)
@@ -67,7 +67,7 @@ def rasterize_dense(means2d, conics, depths, radii, opacities, colors, backgroun
     return image.reshape(height, width, C), (1 - final_t).reshape(height, width), depth.reshape(height, width), max_w
 
 
-def rasterize_tiles(means2d, conics, depths, radii, opacities, colors, background, width, height):
+def rasterize_ref(means2d, conics, depths, radii, opacities, colors, background, width, height):
     """Tile-binned reference: per 16x16 tile, the Gaussians whose footprint overlaps it, in depth order."""
     C = colors.shape[1]
     dtype, device = means2d.dtype, means2d.device

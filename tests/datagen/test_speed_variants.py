@@ -15,7 +15,7 @@ from datagen.speed import (check_interpolation, check_speeds, shutter_frames, sp
                            variant_name)
 from simulator.h5io import read_events
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "configs" / "dataset_paper.yaml")
 
 
