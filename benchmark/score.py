@@ -131,7 +131,7 @@ def load_pairs(dataset: SceneDataset, files: dict[str, Path], inputs: tuple[str,
     correction (events only: the log-intensity gain / offset; otherwise none)."""
     from common.color_correction import correct_colors
     from recon.scoring import Scorer
-    from recon.views import load_frame
+    from recon.dataset_views import load_frame
 
     channels = channels_for(inputs)
     scorer = Scorer(dataset, channels, None if "rgb" in inputs else (lambda p, g: correct_colors(p, g)[0]))

@@ -95,7 +95,7 @@ def render_test_views(model, scene_dir: Path, out: Path, fmt: str = "png") -> in
     the same sRGB-encoded values in [0, 1] as the PNG). Returns the number of views."""
     from common.imageio import write_exr, write_png
     from scene_format.reader import SceneDataset
-    from recon.views import record_camera
+    from recon.dataset_views import record_camera
 
     dataset = SceneDataset(scene_dir)
     records = dataset.frames("test")

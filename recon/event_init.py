@@ -2,9 +2,9 @@
 
 At `carve_times` instants spread over the clip, each camera's events within `carve_window` (a
 fraction of the clip) around the instant mark the pixels where the scene changed as the camera moved
-(recon.events.activity_mask). A uniform backdrop and empty space cause no events, so a candidate point
+(recon.event_supervision.activity_mask). A uniform backdrop and empty space cause no events, so a candidate point
 that some camera sees on an event-free pixel is not part of the scene at that instant
-(recon.init.carve). The union over the instants is the volume any part of the scene swept; the
+(recon.initial_points.carve). The union over the instants is the volume any part of the scene swept; the
 initial points are drawn from it. Candidates come from the auto volume (the cube for objects, the
 dense-to-sparse sphere for rooms), so a scene where every pixel fires (a textured room) keeps
 nearly all of them and the result is close to the paper's initialisation.
@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from scene_format.reader import SceneDataset
-from recon import events as ev
-from recon import init as initial
+from recon import event_supervision as ev
+from recon import initial_points as initial
 from recon.event_windows import EventSource
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from scene_format.reader import SceneDataset
 from recon.model import DynamicGaussians
-from recon.views import load_frame, record_camera
+from recon.dataset_views import load_frame, record_camera
 
 
 class Scorer:

@@ -29,7 +29,7 @@ from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock, write_text_atomic
-from recon import init as initial
+from recon import initial_points as initial
 from recon.config import TrainConfig
 from recon.deform import DeformationField
 from recon.event_init import carved_points
@@ -40,7 +40,7 @@ from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
 from recon.method import Method
-from recon.views import gray_from_srgb
+from recon.dataset_views import gray_from_srgb
 from simulator.pixel import linear_to_srgb, rec709_luma
 
 CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"

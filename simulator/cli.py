@@ -111,7 +111,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         t_us = read_timestamps(args.timestamps, len(files))
     else:
         check_no_gaps(files)
-        from simulator.view import parse_time_us
+        from simulator.event_pictures import parse_time_us
 
         try:
             t0 = parse_time_us(args.t0)
@@ -148,7 +148,7 @@ def run_view(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from simulator.event_file import EventFile
     from simulator.h5io import EventFileError
-    from simulator.view import annotate, event_frame, parse_time_us, save_video
+    from simulator.event_pictures import annotate, event_frame, parse_time_us, save_video
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)

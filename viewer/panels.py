@@ -13,7 +13,7 @@ import numpy as np
 
 from scene_format.reader import FrameRecord, SceneDataset
 from simulator.event_file import EventFile
-from simulator.view import annotate, event_frame
+from simulator.event_pictures import annotate, event_frame
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from recon.losses import photometric_loss
 from recon.methods import register
 from recon.raster import Camera
 from recon.method import Method
-from recon.views import load_frame, record_camera
+from recon.dataset_views import load_frame, record_camera
 
 
 @dataclass

@@ -18,14 +18,14 @@ import torch
 import torch.nn.functional as F
 
 from scene_format.reader import DatasetError, SceneDataset
-from recon import events as ev
+from recon import event_supervision as ev
 from common.config import ConfigError, check_positive
 from recon.config import TrainConfig
 from recon.device import to_device
 from recon.losses import photometric_loss
 from recon.methods import register
 from recon.method import Method
-from recon.views import blur_views
+from recon.dataset_views import blur_views
 
 
 def lowres_l1(render: torch.Tensor, target: torch.Tensor, factor: int) -> torch.Tensor:
@@ -40,7 +40,7 @@ def lowres_l1(render: torch.Tensor, target: torch.Tensor, factor: int) -> torch.
 class DeblurD3DGSConfig:
     """Deblur-D3DGS (the Deblur4DGS blur model on the D3DGS representation): trained on the frames of
     blur level `frames`, each predicted as the mean in linear light of `blur_samples` renders spread
-    over its exposure (recon.events.exposure_mean), plus Deblur4DGS's multi-resolution consistency:
+    over its exposure (recon.event_supervision.exposure_mean), plus Deblur4DGS's multi-resolution consistency:
     lambda_lowres x L1 between the render at the exposure centre and the blurred frame, both
     area-averaged over lowres_factor x lowres_factor blocks (blur moves little at that scale)."""
     frames: str = "medium"

@@ -23,7 +23,7 @@ from common.color_correction import correct_colors
 from recon.config import TrainConfig
 from recon.methods import register
 from recon.methods.d3dgs import D3DGS, TrainView
-from recon.views import record_camera
+from recon.dataset_views import record_camera
 from simulator.event_file import EventFile
 
 

@@ -7,7 +7,7 @@ read from the event files), so L_hat is the quantity the events measure. Each st
 
 1. ESS: a camera and a window of N events (recon.event_windows), and with `views_per_step` > 1 the
    same time window on other cameras; N_gt from the events and the simulator's thresholds, with
-   N(0, sigma) jitter on event-free pixels (recon.events.gt_counts);
+   N(0, sigma) jitter on event-free pixels (recon.event_supervision.gt_counts);
 2. renders at the window's end points, poses interpolated along each camera's trajectory (the
    deformation field runs once per end point for every camera);
 3. AES: N_pred = (L_hat(t_end) - L_hat(t_start)) / C_hat with a learnable C_hat = exp(log_c);
@@ -26,7 +26,7 @@ import torch
 from torch import nn
 
 from scene_format.reader import SceneDataset
-from recon import events as ev
+from recon import event_supervision as ev
 from common.color_correction import correct_colors
 from recon.methods.e4dgs_config import E4DGSConfig
 from recon.event_windows import EventSource, WindowSampler
@@ -35,7 +35,7 @@ from recon.losses import photometric_loss
 from recon.methods import register
 from recon.model import DynamicGaussians
 from recon.method import Method
-from recon.views import BlurView, blur_views, dataset_camera
+from recon.dataset_views import BlurView, blur_views, dataset_camera
 
 PAPER_PIXELS = 346 * 260
 

@@ -32,7 +32,7 @@ class EventConfig:
     c_init: float = 0.15
     c_lr: float = 1e-3                 # Adam rate on log C_hat
     recon_eps: float = 1e-3
-    # the event loss averaged over count maps pooled in s x s blocks (recon.events.multiscale_recon_loss);
+    # the event loss averaged over count maps pooled in s x s blocks (recon.event_supervision.multiscale_recon_loss);
     # (1,) is the paper's per-pixel loss
     loss_scales: tuple[int, ...] = (1,)
     lambda_recon: float = 1.0

@@ -12,7 +12,7 @@ from scene_format.reader import SceneDataset
 from recon.evaluate import evaluate_psnr
 from recon.methods.e4dgs import E4DGS, E4DGSRGB
 from recon.trainer import Trainer
-from recon.views import dataset_camera
+from recon.dataset_views import dataset_camera
 
 SMALL = {"train.init.n_points_object": 2000, "train.deform_bf16": True, "train.lr.feature": 0.01,
          "train.snapshots": [1.0], "train.checkpoint_every": 5000}
@@ -81,7 +81,7 @@ def test_aes_switch_learns_or_freezes_the_threshold(motion_scene, tmp_path):
 
 
 def test_tv_switch_changes_the_loss_by_its_term(motion_scene, tmp_path):
-    from recon import events as ev
+    from recon import event_supervision as ev
 
     # mid-grey points: a background-coloured start renders no edges, so its TV would be 0
     mid = {"events.ess": False, "train.init.color": "mid"}
@@ -185,7 +185,7 @@ def test_multi_view_step_supervises_the_same_time_window_on_distinct_cameras(mot
 
 
 def test_loss_scales_switch_pools_the_count_maps_and_scale_1_is_the_paper_loss(motion_scene, tmp_path):
-    from recon import events as ev
+    from recon import event_supervision as ev
 
     base = {"events.ess": False, "events.lambda_tv": 0.0}
     px = trainer_for(motion_scene, tmp_path / "px", **base)

@@ -3,8 +3,8 @@ and `init.kind: events` puts the initial points where the tiny scene's events ar
 import numpy as np
 import pytest
 
-from recon import events as ev
-from recon import init as initial
+from recon import event_supervision as ev
+from recon import initial_points as initial
 
 
 def test_activity_mask_ignores_isolated_events_and_grows_by_the_dilation():

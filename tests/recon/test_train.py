@@ -16,7 +16,7 @@ from recon.evaluate import evaluate_psnr
 from recon.methods.d3dgs import D3DGS
 from recon.render import camera_from_pose
 from recon.trainer import TrainingError
-from recon.views import record_camera
+from recon.dataset_views import record_camera
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -8,7 +8,7 @@ import torch
 
 import recon
 from scene_format.reader import SceneDataset
-from recon import events as ev
+from recon import event_supervision as ev
 from common.color_correction import correct_colors, fit_gain_offset
 from recon.event_windows import EventSource
 from recon.methods.e4dgs import E4DGS, PAPER_PIXELS
