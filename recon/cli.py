@@ -23,16 +23,11 @@ def add_train_parser(sub) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from scene_format.reader import DatasetError
-    from common.config import ConfigError
     from recon.api import fit, parse_set
-    from recon.trainer import TrainingError
 
-    try:
-        result = fit(args.scene, args.method, args.config, args.out, parse_set(args.overrides),
-                     progress=not args.no_progress)
-    except (ConfigError, DatasetError, TrainingError, FileNotFoundError, ValueError) as exc:
-        raise SystemExit(f"error: {exc}") from None
+    # a refused config, scene or run is a typed error naming what is wrong: e4dgs.cli prints it as one line
+    result = fit(args.scene, args.method, args.config, args.out, parse_set(args.overrides),
+                 progress=not args.no_progress)
     model, psnr = result.model, result.last_test_psnr
     last = f", test PSNR {psnr[0]:.2f} dB" if psnr else ""
     print(f"train: {args.method} on {args.scene.name}: {model.meta.iteration} iterations, {len(model)} Gaussians"
@@ -117,10 +112,7 @@ def run_render(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise SystemExit(f"error: --out {args.out}: an existing file; expected a folder for the images")
-    try:
-        model = load(args.model)
-    except (FileNotFoundError, ValueError) as exc:
-        raise SystemExit(f"error: {exc}") from None
+    model = load(args.model)            # a missing or unreadable model: one line from e4dgs.cli
     if args.test_views is not None:
         n = render_test_views(model, args.test_views, args.out, args.format)
         print(f"render: {n} test view(s) of {args.test_views} -> {args.out}")
@@ -135,10 +127,7 @@ def run_render(args: argparse.Namespace) -> int:
                          "give distinct times")
     camera = int(args.camera) if args.camera.isdigit() else camera_from_json(Path(args.camera))
     for t in args.t:
-        try:
-            img = model.render_numpy(camera, t)
-        except ValueError as exc:
-            raise SystemExit(f"error: {exc}") from None
+        img = model.render_numpy(camera, t)
         img = np.repeat(img, 3, axis=2) if img.shape[2] == 1 else img
         name = f"cam{args.camera}" if isinstance(camera, int) else Path(args.camera).stem
         path = write_png(args.out / f"{name}_t{t:.4f}.png", (img * 255 + 0.5).astype(np.uint8))
