@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job
-from benchmark.job_run import job_data_dir, row_summary, run_folder
+from benchmark.job_run import by_folder, job_data_dir, row_summary, run_folder
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 
 
@@ -36,14 +36,13 @@ def wants_gpu(method_cfg) -> bool:
 
 
 def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root: Path, out_root: Path,
-                    opts: RayOptions, record: Callable[[list[dict]], None], progress: bool = True,
-                    log: Callable[[str], None] = print) -> None:
-    """Run `todo` as Ray tasks, calling record(rows) on the driver as each task ends (a task that failed
-    every attempt records rows with status "failed" and the error)."""
+                    record: Callable[[list[dict]], None], progress: bool = True,
+                    log: Callable[[str], None] = print, *, opts: RayOptions) -> None:
+    """The Ray executor (job_run.JobExecutor, with the Ray options bound): `todo` as Ray tasks, calling
+    record(rows) on the driver as each task ends (a task that failed every attempt records rows with
+    status "failed" and the error)."""
     data_root, out_root = Path(data_root).resolve(), Path(out_root).resolve()   # workers may run elsewhere
-    groups: dict[str, list[Job]] = {}
-    for job in todo:
-        groups.setdefault(job.folder, []).append(job)
+    groups = by_folder(todo)
     with ray_session(opts):
         gpus = cluster_gpus()
         specs = []

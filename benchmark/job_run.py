@@ -1,10 +1,13 @@
-"""One benchmark job's work, shared by the serial path (benchmark.runner) and the Ray path
-(benchmark.distributed): its scene folder, its typed config, training or reuse, scoring the final
-model, its floor and its snapshots, and the row it becomes."""
+"""One benchmark job's work, shared by the serial path and the Ray path (benchmark.distributed): its
+scene folder, its typed config, training or reuse, scoring the final model, its floor and its
+snapshots, and the row it becomes. Both paths are executors with one interface (`JobExecutor`):
+`run_jobs_here` below, `distributed.run_jobs_on_ray`; each trains every training folder once (the
+folder's other jobs reuse its row) and hands the rows to the driver's `record`."""
 from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Callable, Protocol
 
 from benchmark.config import REPO, BenchConfig, Job
 from common import provenance
@@ -148,3 +151,38 @@ def run_folder(jobs: list[Job], cfg: BenchConfig, data_root: Path, out_root: Pat
 def row_summary(row: dict) -> str:
     lpips = f" LPIPS {row['lpips']:.3f}" if row.get("lpips") is not None else ""
     return f"{row['key']}: PSNR {row['psnr']:.2f} SSIM {row['ssim']:.3f}{lpips}, {row['wall_s']:.0f} s training"
+
+
+class JobExecutor(Protocol):
+    """Runs `todo` (their typed configs in `resolved`, by job key), calling `record(rows)` as each
+    training folder's jobs finish; the serial and the Ray executors take the same arguments."""
+    def __call__(self, todo: list[Job], resolved: dict, cfg: BenchConfig, data_root: Path, out_root: Path,
+                 record: Callable[[list[dict]], None], progress: bool = True,
+                 log: Callable[[str], None] = print) -> None: ...
+
+
+def by_folder(todo: list[Job]) -> dict[str, list[Job]]:
+    """Jobs grouped by training folder, in the order their folders first appear (one training each)."""
+    groups: dict[str, list[Job]] = {}
+    for job in todo:
+        groups.setdefault(job.folder, []).append(job)
+    return groups
+
+
+def run_jobs_here(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root: Path, out_root: Path,
+                  record: Callable[[list[dict]], None], progress: bool = True,
+                  log: Callable[[str], None] = print) -> None:
+    """The serial executor: the jobs in this process one after another, in their order; a job whose
+    training folder an earlier job of this call trained and scored completely reuses its row (an
+    error stops the run; the recorded rows stay and a later run resumes the rest)."""
+    trained: dict[str, dict] = {}
+    t0 = time.time()
+    for n, job in enumerate(todo, 1):
+        log(f"bench [{n}/{len(todo)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
+        earlier = trained.get(job.folder)
+        if earlier is not None and complete_row(earlier, job, cfg, data_root):
+            row = reused_row(job, earlier)
+        else:
+            row = trained[job.folder] = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
+        record([row])
+        log(f"bench [{n}/{len(todo)}] {row_summary(row)}")

@@ -15,11 +15,12 @@ from __future__ import annotations
 import json
 import sys
 import time
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job, dump, jobs  # noqa: F401 - jobs: the grid, for callers
-from benchmark.job_run import complete_row, resolve_job, reused_row, row_summary, run_job
+from benchmark.job_run import JobExecutor, complete_row, resolve_job, reused_row, run_jobs_here
 from benchmark.rows import read_results, write_results  # noqa: F401 - read_results: for callers
 from common.fileio import write_text_atomic
 
@@ -89,18 +90,12 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     if any(r for _, r in reusable):
         record([reused_row(j, r) for j, r in reusable if r])
         remaining = [j for j, r in reusable if not r]
+    executor: JobExecutor = run_jobs_here
     if ray is not None:
         from benchmark.distributed import run_jobs_on_ray
 
-        run_jobs_on_ray(remaining, resolved, cfg, data_root, out_root, ray, record, progress, log)
-    else:
-        for n, job in enumerate(remaining, 1):
-            log(f"bench [{n}/{len(remaining)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
-            earlier = scored(job)
-            row = (reused_row(job, earlier) if earlier else
-                   run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key]))
-            record([row])
-            log(f"bench [{n}/{len(remaining)}] {row_summary(row)}")
+        executor = partial(run_jobs_on_ray, opts=ray)
+    executor(remaining, resolved, cfg, data_root, out_root, record, progress, log)
     log(f"bench {preset_name}: done in {time.time() - t_start:.0f} s ({dataset_s:.0f} s dataset, "
         f"{time.time() - t0:.0f} s jobs) -> {results_path}")
     return rows

@@ -142,7 +142,7 @@ def _tiny_bench(motion_scene) -> BenchConfig:
 
 
 def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
-    from benchmark import runner
+    from benchmark import job_run as runner     # the serial executor's per-job work
 
     cfg = _tiny_bench(motion_scene)
     out = tmp_path / "runs"
