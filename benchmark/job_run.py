@@ -25,14 +25,14 @@ def job_data_dir(job: Job, data_root: Path) -> Path:
     return (data_root.parent / job.dataset if job.dataset else data_root) / job.data_scene
 
 
-def evaluate_model(model, scene_dir: Path, lpips_net: str | None, placement=None) -> dict:
+def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placement=None) -> dict:
     """Scores of `model` on the scene's test views through `recon.evaluate`, rendered on the run's
     (device, backend) (default: CPU, auto), over the whole images and, where the scene has dynamic
     masks, over the moving pixels (`*_dyn`)."""
     from recon.api import evaluate
 
     device, backend = placement or ("cpu", "auto")
-    return evaluate(model, scene_dir, "test", lpips_net=lpips_net, backend=backend, device=device)
+    return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device)
 
 
 DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
@@ -99,12 +99,13 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     scene_dir = job_data_dir(job, data_root)
     result = fit(scene_dir, job.method, method_cfg, out_root / job.folder, progress=progress, keep_initial=True)
     model, placement = result.model, (result.device, result.backend)       # score where it trained
+    dataset = SceneDataset(scene_dir)        # opened once for every score below
     t1 = time.time()
     lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
-    final = evaluate_model(model, scene_dir, lpips_net, placement)
+    final = evaluate_model(model, dataset, lpips_net, placement)
     # the floor: what the method's own starting model scores after the same correction (an events-only
     # score means something about events only as far as it rises above this)
-    floor = evaluate_model(result.initial, scene_dir, None, placement)
+    floor = evaluate_model(result.initial, dataset, None, placement)
     snapshots = []
     for row in result.log:
         if "snapshot" not in row:
@@ -114,7 +115,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         elif not scores_snapshots(job):      # the tables plot the main study's curves only: the others keep
             continue                         # their training log's test PSNR (log.jsonl), not re-rendered
         else:
-            s = evaluate_model(load(result.run_dir / row["snapshot"]), scene_dir, None, placement)
+            s = evaluate_model(load(result.run_dir / row["snapshot"]), dataset, None, placement)
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {
@@ -122,7 +123,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         **{k: final[k] for k in DYN_KEYS if k in final},
         "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"],
         **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}),
-        "data": data_stats(SceneDataset(scene_dir)), "n_test_images": final["n_images"],
+        "data": data_stats(dataset), "n_test_images": final["n_images"],
         "iterations": result.iterations, "n_gaussians": len(model), "channels": model.meta.channels,
         "device": result.device, "backend": result.backend,
         "wall_s": result.train_s, "train_elapsed_s": round(result.elapsed_s, 1),

@@ -32,7 +32,6 @@ def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any]
 class TrainResult:
     """What `fit` returns: the trained model and where, how and how long it was trained."""
     model: DynamicGaussians
-    method: str
     run_dir: Path                 # the training folder (run.json, log.jsonl, snapshots/, model.pt)
     fingerprint: str              # the run's identity: method, resolved config, its inputs, the scene's manifest
     log: tuple[dict, ...]         # the rows of log.jsonl, oldest first
@@ -41,6 +40,10 @@ class TrainResult:
     train_s: float                # training wall-clock seconds, summed over resumes, evaluation excluded
     elapsed_s: float              # this call's seconds (set-up, resume or reuse of a finished run included)
     initial: DynamicGaussians | None = field(default=None, repr=False)   # the untrained model, when asked for
+
+    @property
+    def method(self) -> str:
+        return self.model.meta.method
 
     @property
     def iterations(self) -> int:
@@ -58,7 +61,7 @@ def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_di
         overrides: Mapping[str, Any] | None = None, progress: bool = True,
         on_iteration: Callable | None = None, keep_initial: bool = False) -> TrainResult:
     """Train `method` on the scene at `scene_dir`; resumes a killed run in `out_dir`, and returns the
-    finished model directly if `out_dir` already holds it. out_dir defaults to runs/<scene>/<method>.
+    finished run as it is if `out_dir` already holds it. out_dir defaults to runs/<scene>/<method>.
     `keep_initial` also returns the untrained model the run starts from (the benchmark's floor)."""
     t0 = time.time()
     dataset = SceneDataset(scene_dir)
@@ -71,21 +74,22 @@ def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_di
     initial = trainer.initial_model() if keep_initial else None
     model = trainer.run()
     log = tuple(json.loads(line) for line in (out / "log.jsonl").read_text().splitlines())
-    return TrainResult(model=model, method=method, run_dir=out, fingerprint=trainer.fingerprint, log=log,
+    return TrainResult(model=model, run_dir=out, fingerprint=trainer.fingerprint, log=log,
                        device=str(trainer.device), backend=trainer.backend,
                        train_s=float(log[-1]["wall_s"]) if log else 0.0, elapsed_s=time.time() - t0, initial=initial)
 
 
-def evaluate(model: DynamicGaussians, scene_dir: str | Path, split: str = "test", lpips_net: str | None = None,
-             backend: str = "auto", device: str | None = None, dynamic: bool = True) -> dict:
+def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, split: str = "test",
+             lpips_net: str | None = None, backend: str = "auto", device: str | None = None, dynamic: bool = True) -> dict:
     """Scores of a trained model on a scene's held-out views, the way the benchmark scores them: the
     model's own method and config (stored in it) pick the channels and the correction (E-4DGS's
     log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net); where the
     scene has dynamic-region masks (and `dynamic`), the same over the moving pixels (`*_dyn`).
-    Rendered on `device` (default: where the model is) with `backend`."""
+    `scene_dir` is a scene folder or one already opened. Rendered on `device` (default: where the model
+    is) with `backend`."""
     from common.metrics.image import score_pairs
 
-    dataset = SceneDataset(scene_dir)
+    dataset = scene_dir if isinstance(scene_dir, SceneDataset) else SceneDataset(scene_dir)
     method = get_method(model.meta.method)
     cfg = resolve_config(model.meta.method, model.meta.config or None)
     records = dataset.frames(split)

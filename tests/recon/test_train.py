@@ -257,7 +257,8 @@ def test_fit_returns_a_typed_result_that_matches_its_folder(motion_scene, tmp_pa
     cfg = {**FAST, "train.iterations": 3, "train.scale_schedule": False, "train.init.n_points_object": 100,
            "train.densify.enabled": False}
     result = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "r", progress=False, keep_initial=True)
-    assert isinstance(result, recon.TrainResult) and result.run_dir == tmp_path / "r"
+    assert isinstance(result, recon.TrainResult) and result.run_dir == tmp_path / "r" and result.method == "d3dgs"
+    assert recon.evaluate(result.model, SceneDataset(motion_scene)) == recon.evaluate(result.model, motion_scene)
     log = [json.loads(line) for line in (tmp_path / "r" / "log.jsonl").read_text().splitlines()]
     assert list(result.log) == log and result.train_s == log[-1]["wall_s"] and result.iterations == 3
     assert result.fingerprint == json.loads((tmp_path / "r" / "run.json").read_text())["fingerprint"]
