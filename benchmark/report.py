@@ -112,6 +112,9 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
              "values over each scene's held-out views; methods that see no RGB (events only) are scored "
              "against grayscale ground truth after the log-intensity gain (>= 0) / offset correction, methods that "
              "see RGB against RGB. Train time: training-only wall-clock seconds, mean over scenes.\n")
+    machines = sorted({(r["cpu"], r.get("precision") or "?") for c in cells for r in table[c].values() if r.get("cpu")})
+    if machines:   # seconds mean something only beside the processor (and the deformation's dtype on it)
+        md.write("Train times measured on: " + "; ".join(f"{cpu}, deformation in {prec}" for cpu, prec in machines) + ".\n")
     speeds = sorted({(labels.get(c, c), table[c][s]["speed"]) for c in cells for s in scenes
                      if table[c].get(s, {}).get("speed") is not None})
     if speeds:

@@ -20,7 +20,7 @@ OPTIONAL_NUMBER = (int, float, type(None))
 ROW_TYPES: dict[str, tuple[type, ...]] = {
     "key": (str,), "study": (str,), "scene": (str,), "cell": (str,), "method": (str,), "label": (str,),
     "variant": (str,), "dataset": (str,), "data_scene": (str,), "run_dir": (str,), "config_hash": (str,),
-    "status": (str,), "error": (str,), "inputs": (list,), "overrides": (dict,), "data": (dict,),
+    "status": (str,), "error": (str,), "device": (str,), "backend": (str,), "precision": (str,), "cpu": (str,), "inputs": (list,), "overrides": (dict,), "data": (dict,),
     "seed": (int, type(None)), "speed": OPTIONAL_NUMBER,
     "psnr": NUMBER, "ssim": NUMBER, "psnr_luma": OPTIONAL_NUMBER, "lpips": OPTIONAL_NUMBER,
     "floor_psnr": OPTIONAL_NUMBER, "floor_psnr_luma": OPTIONAL_NUMBER, "floor_psnr_dyn": OPTIONAL_NUMBER,

@@ -220,7 +220,7 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
             "config_hash": _digest(sorted(files.values())), "run_dir": str(folder),
             **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
             **{k: final[k] for k in DYN_KEYS if k in final}, "floor_psnr": None, "floor_psnr_luma": None, "data": data_stats(ds), "n_test_images": final["n_images"],
-            "iterations": None, "n_gaussians": None, "channels": channels, "device": "", "backend": "",
+            "iterations": None, "n_gaussians": None, "channels": channels, "device": "", "backend": "", "precision": "",
             "wall_s": train_seconds, "train_elapsed_s": None, "eval_s": round(time.time() - t0, 1),
             "snapshots": sorted(snapshots, key=lambda p: p["wall_s"]), "versions": versions(),
             "git_commit": git_commit(), "lpips_net": lpips_net, "scored_unix": int(time.time())})

@@ -7,3 +7,5 @@ synth.py       on-the-fly training sequences from the project's own simulator
 train.py       `e4dgs train-e2vid`: resumable training
 reconstruct.py running a network over an event file; the high-pass-filter baseline
 """
+
+import common  # noqa: F401  (first: it sets the OpenMP wait policy before torch or numba loads)

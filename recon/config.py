@@ -137,7 +137,10 @@ class TrainConfig:
     densify: DensifyConfig = field(default_factory=DensifyConfig)
     init: InitConfig = field(default_factory=InitConfig)
     background: tuple[float, float, float] | None = None   # None: the scene's empty-background colour
-    deform_bf16: bool = False         # run the deformation MLP under bfloat16 autocast (CPU: ~2.3x faster)
+    # the deformation MLP's arithmetic: auto measures this machine once and takes the faster of
+    # float32 and bfloat16 autocast (recon.precision; bf16 is 2-3x faster on cores with native bf16,
+    # 10x slower on cores without); parameters stay float32 either way
+    precision: str = "auto"
     backend: str = "auto"             # auto: gsplat on CUDA, the numba cpu backend on the CPU (recon.raster)
     device: str = "auto"              # auto: CUDA when torch sees it and gsplat is installed, else the CPU
     seed: int = 0
@@ -157,6 +160,8 @@ class TrainConfig:
                 raise ConfigError(f"snapshots: expected fractions in (0, 1], got {f!r}")
         if self.background is not None and not all(0 <= c <= 1 for c in self.background):
             raise ConfigError(f"background: expected values in [0, 1], got {self.background!r}")
+        if self.precision not in ("auto", "float32", "bfloat16"):
+            raise ConfigError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
         if self.backend not in ("auto", "cpu", "gsplat", "torch", "dense"):
             raise ConfigError(f"backend: expected auto, cpu, gsplat, torch or dense, got {self.backend!r}")
         if not (self.device in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", self.device)):

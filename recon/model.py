@@ -36,7 +36,7 @@ class ModelMeta:
     extent: float                     # scene extent (3DGS's cameras_extent)
     duration_us: int                  # clip length; t = t_us / duration_us
     deform_enabled: bool = False      # False until the warm-up has passed
-    deform_bf16: bool = False
+    precision: str = "float32"        # the deformation's dtype (float32 | bfloat16) it trained and renders in
     active_sh_degree: int = 0
     iteration: int = 0
     scene: str = ""
@@ -83,12 +83,12 @@ class DynamicGaussians:
     def render_output(self, camera: Camera, t: float, backend: str = "auto") -> RenderOutput:
         """Differentiable render at normalised time t (the deformation applies once enabled)."""
         field = self.deform if self.meta.deform_enabled else None
-        return render_at(self.gaussians, field, camera, t, self.background, backend, self.meta.deform_bf16)
+        return render_at(self.gaussians, field, camera, t, self.background, backend, self.meta.precision)
 
     def render_outputs(self, cameras: list[Camera], t: float, backend: str = "auto") -> list[RenderOutput]:
         """Differentiable renders of several cameras at time t, sharing one deformation evaluation."""
         field = self.deform if self.meta.deform_enabled else None
-        return render_views(self.gaussians, field, cameras, t, self.background, backend, self.meta.deform_bf16)
+        return render_views(self.gaussians, field, cameras, t, self.background, backend, self.meta.precision)
 
     @torch.no_grad()
     def render(self, camera: Camera | int, t: float, backend: str = "auto") -> torch.Tensor:
@@ -122,7 +122,7 @@ class DynamicGaussians:
     def from_state(cls, state: dict[str, Any], source: str = "<state>") -> "DynamicGaussians":
         if not isinstance(state, dict) or state.get("format") != FORMAT:
             raise ValueError(f"{source}: not a model file of this toolkit (expected format {FORMAT!r})")
-        meta = ModelMeta(**copy.deepcopy(state["meta"]))
+        meta = ModelMeta(**upgrade_meta(copy.deepcopy(state["meta"])))
         n = state["gaussians"]["means"].shape[0]
         gaussians = GaussianModel(n, meta.sh_degree, meta.channels)
         if "anchors" in state["gaussians"]:
@@ -134,6 +134,17 @@ class DynamicGaussians:
         cams = [CameraTrajectory(Intrinsics(**c["intrinsics"]), np.asarray(c["times_us"], np.int64),
                                  np.asarray(c["c2w_opencv"], np.float64)) for c in state.get("cameras", [])]
         return cls(gaussians, deform, meta, cams)
+
+
+def upgrade_meta(meta: dict) -> dict:
+    """A stored ModelMeta mapping of an older version in today's terms: `deform_bf16: true / false`
+    (also inside the stored config's train section) became `precision: bfloat16 / float32`."""
+    if "deform_bf16" in meta:
+        meta["precision"] = "bfloat16" if meta.pop("deform_bf16") else "float32"
+    train = meta.get("config", {}).get("train") if isinstance(meta.get("config"), dict) else None
+    if isinstance(train, dict) and "deform_bf16" in train:
+        train["precision"] = "bfloat16" if train.pop("deform_bf16") else "float32"
+    return meta
 
 
 def load(path: str | Path) -> DynamicGaussians:

@@ -1,13 +1,12 @@
 """Rendering a deformable Gaussian model at a time: deform, colour, rasterize."""
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 import torch
 
 from recon.deform import DeformationField
 from recon.gaussians import GaussianModel
+from recon.precision import autocast
 from recon.raster import Camera, RenderOutput, render
 
 
@@ -54,29 +53,29 @@ def check_time(t: float) -> float:
     return t
 
 
-def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float, bf16: bool = False):
-    """Means [N,3], quaternions [N,4] and log-scales [N,3] at normalised time t (field None: canonical)."""
+def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float, precision: str = "float32"):
+    """Means [N,3], quaternions [N,4] and log-scales [N,3] at normalised time t (field None: canonical);
+    the field computes in `precision` (float32, or bfloat16 autocast; its outputs come back float32)."""
     means, quats, log_scales = gaussians.means, gaussians.quats, gaussians.log_scales
     if field is None or len(gaussians) == 0:
         return means, quats, log_scales
-    ctx = torch.autocast("cpu", dtype=torch.bfloat16) if bf16 and means.device.type == "cpu" else contextlib.nullcontext()
-    with ctx:
+    with autocast(precision, means.device):
         dx, dq, ds = field(gaussians.deformation_inputs(), t)
     return means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype)
 
 
 def render_at(gaussians: GaussianModel, field: DeformationField | None, camera: Camera, t: float,
-              background: torch.Tensor, backend: str = "auto", bf16: bool = False) -> RenderOutput:
+              background: torch.Tensor, backend: str = "auto", precision: str = "float32") -> RenderOutput:
     """Render the model deformed to normalised time t in [0, 1] (field None: the canonical model)."""
-    return render_views(gaussians, field, [camera], t, background, backend, bf16)[0]
+    return render_views(gaussians, field, [camera], t, background, backend, precision)[0]
 
 
 def render_views(gaussians: GaussianModel, field: DeformationField | None, cameras: list[Camera], t: float,
-                 background: torch.Tensor, backend: str = "auto", bf16: bool = False) -> list[RenderOutput]:
+                 background: torch.Tensor, backend: str = "auto", precision: str = "float32") -> list[RenderOutput]:
     """Render several cameras at one normalised time t: the deformation field runs once and every
     render shares its output (and its gradient)."""
     check_time(t)
-    state = deformed(gaussians, field, t, bf16)
+    state = deformed(gaussians, field, t, precision)
     return [render_deformed(gaussians, state, camera, background, backend) for camera in cameras]
 
 

@@ -3,16 +3,19 @@ densification, checkpoints with resume, the log, evaluation points and snapshots
 
 A method supplies the loss (`Method.step`) and its data; the trainer does the rest:
 
-    out_dir/run.json            method, fingerprint, resolved config, scene
+    out_dir/run.json            method, fingerprint, resolved config, scene; `precision`: the deformation's
+                                dtype of each start (fresh or resumed) and how it was chosen (recon.precision)
     out_dir/checkpoint.pt       latest resumable state (atomic; removed when training finishes)
     out_dir/log.jsonl           rows {iteration, wall_s, loss, n_gaussians[, test_psnr, test_psnr_on: what it
                                 compares: rgb, or gray after the gain/offset fit]} (wall_s: training
-                                time only, evaluation and file writing excluded, summed over resumes)
+                                time only, evaluation and file writing excluded, summed over resumes;
+                                the first row of each start also has `precision`)
     out_dir/snapshots/iter_XXXXXX.pt   models at the configured fractions of the budget
     out_dir/model.pt            the finished model
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import replace
 import math
@@ -40,6 +43,7 @@ from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
 from recon.method import Method
+from recon.precision import PrecisionChoice, resolve_precision
 from recon.dataset_views import gray_from_srgb
 from simulator.pixel import linear_to_srgb, rec709_luma
 
@@ -137,6 +141,12 @@ class Trainer:
         self.wall_s = 0.0
         self.iteration = 0
         self._order: list[int] = []
+        self._start_iteration: int | None = None
+
+    @functools.cached_property
+    def precision(self) -> PrecisionChoice:
+        """The deformation's dtype on this machine (train.precision; `auto` measured once per machine)."""
+        return resolve_precision(self.tcfg.precision, self.device)
 
     # -- set-up -----------------------------------------------------------------------------------
     def _new_model(self) -> DynamicGaussians:
@@ -153,7 +163,7 @@ class Trainer:
         deform = DeformationField()
         meta = ModelMeta(method=self.method.name, channels=channels, sh_degree=self.tcfg.sh_degree, background=bg,
                          extent=self.extent, duration_us=self.dataset.duration_us,
-                         deform_bf16=self.tcfg.deform_bf16, scene=self.dataset.scene.name,
+                         precision=self.precision.dtype, scene=self.dataset.scene.name,
                          config=to_dict(self.cfg))
         model = DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
         self.method.setup_model(model)
@@ -248,6 +258,15 @@ class Trainer:
         self.log = json.loads(state["log"])
         return True
 
+    def _record_precision(self) -> None:
+        """This start's precision in run.json (one entry per start: a resumed `auto` run measures again on
+        the machine it resumes on; the parameters are float32, so either dtype continues the run)."""
+        self.model.meta.precision = self.precision.dtype
+        run = self.out / "run.json"
+        info = json.loads(run.read_text())
+        info["precision"] = info.get("precision", []) + [{"from_iteration": self.iteration, **self.precision.to_dict()}]
+        write_text_atomic(run, json.dumps(info, indent=1))
+
     def _write_log(self) -> None:
         write_text_atomic(self.out / "log.jsonl", "".join(json.dumps(r) + "\n" for r in self.log))
 
@@ -286,6 +305,9 @@ class Trainer:
         else:                              # said even without progress bars: a job's log shows its resumes
             tqdm.write(f"{self.method.name}: resuming {self.out} at iteration {self.iteration} of "
                        f"{self.tcfg.iterations} ({self.wall_s:.0f} s trained so far)")
+        tqdm.write(f"{self.method.name} {self.dataset.scene.name}: deformation in {self.precision.describe()}")
+        self._record_precision()
+        self._start_iteration = self.iteration
         # kernel compilation (numba's first call, gsplat's CUDA build) is not training time
         warm_up(self.backend, self.device, self.method.channels())
 
@@ -348,7 +370,10 @@ class Trainer:
                 row["snapshot"] = f"snapshots/iter_{it:06d}.pt"
         if info:
             row["densify"] = info
-        if do_eval or info or it % 10 == 0 or it == 1:
+        first = self._start_iteration is not None and it == self._start_iteration + 1
+        if first:
+            row["precision"] = self.precision.dtype
+        if do_eval or info or first or it % 10 == 0 or it == 1:
             self.log.append(row)
         return row
 

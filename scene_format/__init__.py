@@ -7,4 +7,5 @@
     transforms.py  the D-NeRF style frame lists (transforms_*.json)
     verify.py      `e4dgs check`: every file against the manifest
 """
+import common  # noqa: F401  (first: it sets the OpenMP wait policy before torch or numba loads)
 from scene_format.reader import DatasetError, FrameRecord, SceneDataset, SceneDescription  # noqa: F401

@@ -78,7 +78,7 @@ class TimedModel:
         with self._lock:
             if self._t != t:
                 field = self.model.deform if self.model.meta.deform_enabled else None
-                self._state = deformed(self.model.gaussians, field, t, self.model.meta.deform_bf16)
+                self._state = deformed(self.model.gaussians, field, t, self.model.meta.precision)
                 self._t = t
             out = render_deformed(self.model.gaussians, self._state, camera, self.model.background)
         return to_uint8_rgb(out.image.clamp(0.0, 1.0).cpu().numpy())

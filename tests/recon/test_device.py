@@ -64,7 +64,7 @@ def test_to_device_rebuilds_nested_dataclasses():
 SMALL = {"train.init.n_points_object": 300, "train.iterations": 40, "train.warm_up": 0,
          "train.densify.grad_threshold": 1e-12, "train.eval_every": 20, "train.eval_max_views": 2,
          "train.snapshots": [0.5, 1.0], "train.checkpoint_every": 25, "train.device": "cpu"}
-EVENT = {"events.iip_interval": 20_000, "events.iip_threshold": 1e-4, "train.deform_bf16": False}
+EVENT = {"events.iip_interval": 20_000, "events.iip_threshold": 1e-4, "train.precision": "float32"}
 CASES = [("d3dgs", {}), ("deblur_d3dgs", {"frames": "mild", "blur_samples": 3}), ("e4dgs", EVENT),
          ("e4dgs_rgb", {**EVENT, "rgb_frames": "mild", "rgb_samples": 3})]
 

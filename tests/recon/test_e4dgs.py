@@ -14,7 +14,7 @@ from recon.methods.e4dgs import E4DGS, E4DGSRGB
 from recon.trainer import Trainer
 from recon.dataset_views import dataset_camera
 
-SMALL = {"train.init.n_points_object": 2000, "train.deform_bf16": True, "train.lr.feature": 0.01,
+SMALL = {"train.init.n_points_object": 2000, "train.precision": "float32", "train.lr.feature": 0.01,
          "train.snapshots": [1.0], "train.checkpoint_every": 5000}
 TRAIN_ITERS = 1000   # with densification off to stay fast: ~50 s on 2 cores
 # stated target: held-out PSNR after colour correction (gain >= 0). Measured: the untrained model

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 # a small, fast D3DGS: the public schedule scaled to the budget (warm-up at its 200-iteration floor),
 # colour learning rate 4x the public one (random init starts grey; see configs/recon/d3dgs_quick.yaml)
-FAST = {"train.init.n_points_object": 2000, "train.deform_bf16": True, "train.snapshots": [1.0],
+FAST = {"train.init.n_points_object": 2000, "train.precision": "float32", "train.snapshots": [1.0],
         "train.checkpoint_every": 1000, "train.lr.feature": 0.01}
 OVERFIT_ITERS = 600
 # stated targets, measured 29.2 dB (train) and +1.1 dB over static on the test views; the background
