@@ -20,7 +20,9 @@ so the intervals do not overlap), and the rest (SH colours, losses, event maps, 
 (PYTHONPATH set to that tree) and the driver alternates single iterations between them, so machine
 stalls hit both alike and the speed-up ratio comes from one run. `--precisions` does the same with
 this tree under several `train.precision` values (one worker each; `auto` shows what it resolved to),
-so the deformation's dtypes are compared on one machine in one run. Medians throughout; the CPU
+so the deformation's dtypes are compared on one machine in one run; `--fields trajectory` adds a
+worker whose deformation is per-Gaussian trajectories (its time falls under "rest": the MLP columns
+time the MLP only). Medians throughout; the CPU
 (model and its bf16-relevant flags) is printed above the table.
 """
 from __future__ import annotations
@@ -126,7 +128,7 @@ def _first_layer_node(root, weight):
     return None
 
 
-def build_trainer(scene: str, method: str, n: int, phase: str, out: str, precision: str | None = None):
+def build_trainer(scene: str, method: str, n: int, phase: str, out: str, extra: dict | None = None):
     import torch
 
     import recon
@@ -146,7 +148,7 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str, precisi
     # with the events) and the exposure renders the quick E-4DGS + RGB recipe uses
     overrides = {"train.init.n_points_object": n, "train.init.n_points_room": n, "train.init.kind": "auto",
                  **({"rgb_samples": 2} if method == "e4dgs_rgb" else {}),
-                 **({"train.precision": precision} if precision else {})}
+                 **(extra or {})}
     cfg = recon.resolve_config(method, str(REPO_OF_TREE / CONFIGS[method]), overrides=overrides)
     ds = SceneDataset(scene)
     trainer = Trainer(get_method(method)(ds, cfg), out, progress=False)
@@ -193,7 +195,7 @@ def worker(threads: int) -> None:
         cmd = json.loads(line)
         if "setup" in cmd:
             trainer = build_trainer(cmd["scene"], cmd["setup"], cmd["gaussians"], cmd["phase"],
-                                    tempfile.mkdtemp(dir=tmp.name), cmd.get("precision"))
+                                    tempfile.mkdtemp(dir=tmp.name), cmd.get("overrides"))
             one_iteration(trainer, clock)            # compile / warm caches
             import recon
             choice = getattr(trainer, "precision", None)     # an older tree has no train.precision
@@ -206,12 +208,13 @@ def worker(threads: int) -> None:
 
 # -- driver -----------------------------------------------------------------------------------------
 class Tree:
-    def __init__(self, label: str, root: Path, threads: int, precision: str | None = None):
+    def __init__(self, label: str, root: Path, threads: int, overrides: dict | None = None):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
                    NUMBA_NUM_THREADS=str(max(threads, 1)), E4DGS_BENCH_TREE=str(root))
         if root != REPO:   # an older tree's compiled kernels stay in its temporary folder
             env["NUMBA_CACHE_DIR"] = str(root / ".numba-cache")
-        self.label, self.root, self.precision = label, root, precision
+        self.label, self.root, self.overrides = label, root, overrides or {}
+        self.precision = self.overrides.get("train.precision")
         # this file runs in every tree (-P: its own folder stays off sys.path, the tree's packages are found)
         self.proc = subprocess.Popen([sys.executable, "-P", __file__, "--worker", str(threads)], cwd=root, env=env,
                                      text=True, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
@@ -260,6 +263,8 @@ def main(argv=None) -> int:
     ap.add_argument("--against", default=None, metavar="REV", help="also time this git revision's tree")
     ap.add_argument("--precisions", nargs="+", default=None, choices=["auto", "float32", "bfloat16"],
                     help="time this tree once per train.precision value (default: the configs' own)")
+    ap.add_argument("--fields", nargs="+", default=[], choices=["mlp", "trajectory"],
+                    help="also time this tree with train.deform_field.kind set to each of these")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
@@ -272,7 +277,9 @@ def main(argv=None) -> int:
     with contextlib.ExitStack() as stack:
         from common.machine import cpu_summary
 
-        trees = [Tree("this tree" + (f", {p}" if p else ""), REPO, args.threads, p) for p in (args.precisions or [None])]
+        trees = [Tree("this tree" + (f", {p}" if p else ""), REPO, args.threads, {"train.precision": p} if p else None)
+                 for p in (args.precisions or [None])]
+        trees += [Tree(f"this tree, {f} field", REPO, args.threads, {"train.deform_field.kind": f}) for f in args.fields]
         if args.against:
             trees.append(Tree(args.against, stack.enter_context(checkout(args.against)), args.threads))
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
@@ -283,7 +290,7 @@ def main(argv=None) -> int:
         for method in args.methods:
             for phase in args.phases:
                 replies = [t.ask({"setup": method, "phase": phase, "scene": scene, "gaussians": args.gaussians,
-                                  **({"precision": t.precision} if t.precision else {})}) for t in trees]
+                                  **({"overrides": t.overrides} if t.overrides else {})}) for t in trees]
                 for t, r in zip(trees, replies):
                     if not r["recon"].startswith(str(t.root)):
                         raise RuntimeError(f"bench_train: the worker of {t.label} imported {r['recon']}")
@@ -296,7 +303,8 @@ def main(argv=None) -> int:
                     label = t.label + (f" -> {reply['precision']}" if t.precision == "auto" else "")
                     print(fmt_row(label, method, phase, n, r), flush=True)
                 if args.precisions and len(args.precisions) > 1:
-                    meds = {t.precision: statistics.median(x["total"] for x in r) for t, r in zip(trees, rows) if t.precision}
+                    meds = {t.precision: statistics.median(x["total"] for x in r) for t, r in zip(trees, rows)
+                            if t.precision}
                     base = args.precisions[0]
                     ratios_p.append((method, phase, ", ".join(f"{base} / {p} {meds[base] / meds[p]:.2f}"
                                                                 for p in args.precisions[1:])))

@@ -107,6 +107,31 @@ class DensifyConfig:
 
 
 @dataclass(frozen=True)
+class DeformFieldConfig:
+    """What deforms the canonical Gaussians over time: `mlp`, the paper's 8 x 256 network on the
+    encoded position and time (D3DGS's field, recon.deform), or `trajectory`, per-Gaussian
+    coefficients of `degree` polynomial and `fourier` sine / cosine pairs of time (Gaussian-Flow's
+    dual-domain deformation, recon.trajectory). Trajectory coefficients learn at lr_scale x the
+    means' rate, decaying after the warm-up as the MLP's rate does."""
+    kind: Literal["mlp", "trajectory"] = "mlp"
+    degree: int = 3
+    fourier: int = 2
+    lr_scale: float = 1.0
+
+    def __post_init__(self):
+        if self.degree < 0 or self.fourier < 0 or self.degree + self.fourier == 0:
+            raise ConfigError(f"degree, fourier: expected values >= 0, not both 0; got {self.degree!r}, {self.fourier!r}")
+        if not self.lr_scale >= 0:
+            raise ConfigError(f"lr_scale: expected a value >= 0, got {self.lr_scale!r}")
+
+    def spec(self) -> dict:
+        """recon.deform.make_field's spec of this field."""
+        if self.kind == "mlp":
+            return {"kind": "mlp"}
+        return {"kind": "trajectory", "degree": self.degree, "fourier": self.fourier}
+
+
+@dataclass(frozen=True)
 class Schedule:
     """Iteration numbers after scaling to the run's budget."""
     warm_up: int
@@ -128,6 +153,7 @@ class TrainConfig:
     # scaled by iterations / schedule_reference (a recipe written for 750 iterations, run for 420)
     schedule_reference: int = REFERENCE_ITERATIONS
     deform: bool = True               # false: a static 3DGS (no deformation field is ever applied)
+    deform_field: DeformFieldConfig = field(default_factory=DeformFieldConfig)
     warm_up: int = 3000               # deformation off before this (reference iterations)
     position_lr_steps: int = 30_000
     deform_lr_steps: int = 40_000

@@ -22,6 +22,8 @@ def positional_encoding(x: torch.Tensor, n_freqs: int) -> torch.Tensor:
 
 
 class DeformationField(nn.Module):
+    kind = "mlp"
+
     def __init__(self, depth: int = 8, width: int = 256, x_freqs: int = 10, t_freqs: int = 6):
         super().__init__()
         self.depth, self.x_freqs, self.t_freqs = depth, x_freqs, t_freqs
@@ -37,6 +39,13 @@ class DeformationField(nn.Module):
         for head in (self.warp, self.rotation, self.scaling):
             nn.init.zeros_(head.weight)
             nn.init.zeros_(head.bias)
+
+    def spec(self) -> dict:
+        return {"kind": self.kind}
+
+    def deform(self, gaussians, t: float):
+        """(dx, dq, dlog_s) of `gaussians` at normalised time t: the MLP at their deformation inputs."""
+        return self(gaussians.deformation_inputs(), t)
 
     def forward(self, x: torch.Tensor, t: torch.Tensor | float):
         """x [N, 3] canonical positions (gradient stopped here), t scalar or [N] in [0, 1].
@@ -56,3 +65,17 @@ class DeformationField(nn.Module):
             if i == self.skip:
                 h = torch.cat([emb, h], -1)
         return self.warp(h), self.rotation(h), self.scaling(h)
+
+
+def make_field(spec: dict | None = None) -> nn.Module:
+    """The deformation field a spec names: {"kind": "mlp"} (the paper's MLP, the default) or
+    {"kind": "trajectory", "degree": d, "fourier": L} (per-Gaussian trajectories, recon.trajectory)."""
+    from recon.trajectory import TrajectoryField
+
+    spec = dict(spec or {"kind": "mlp"})
+    kind = spec.pop("kind", "mlp")
+    if kind == "mlp" and not spec:
+        return DeformationField()
+    if kind == "trajectory":
+        return TrajectoryField(**spec)
+    raise ValueError(f"deformation field: expected kind mlp or trajectory, got {kind!r} with {spec}")

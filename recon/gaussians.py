@@ -7,6 +7,9 @@ Densification edits the parameters and the Adam state together: `prune` drops ro
 appends copies, `split` replaces each selected Gaussian by `n` children sampled inside it with
 scales divided by 0.8 n; children inherit every other parameter of their parent.
 
+Optional `motion` [N, B, 10] (a parameter when set): per-Gaussian trajectory coefficients
+(recon.trajectory), edited with the others: a clone or split child inherits its parent's.
+
 Optional `anchors` [N, 3] (a buffer, not optimised): the deformation field's per-Gaussian input when
 set (E-4DGS: children inherit their parent's deformation input, so a split child moves as its
 parent did). None means the field reads the canonical means (D3DGS).
@@ -53,6 +56,15 @@ class GaussianModel(nn.Module):
         self.sh_dc = nn.Parameter(torch.zeros(n, 1, channels))
         self.sh_rest = nn.Parameter(torch.zeros(n, k - 1, channels))
         self.register_buffer("anchors", None)
+        self.register_parameter("motion", None)
+
+    def param_names(self) -> tuple[str, ...]:
+        """The optimised per-Gaussian tensors (PARAM_NAMES, and `motion` when the model has trajectories)."""
+        return PARAM_NAMES + (("motion",) if self.motion is not None else ())
+
+    def enable_motion(self, n_basis: int) -> None:
+        """Give every Gaussian zero trajectory coefficients [N, n_basis, 10] (the identity deformation)."""
+        self.motion = nn.Parameter(torch.zeros(len(self), n_basis, 10, device=self.means.device))
 
     def deformation_inputs(self) -> torch.Tensor:
         """[N, 3] what the deformation field reads per Gaussian (anchors if set, else the means)."""
@@ -106,7 +118,7 @@ class GaussianModel(nn.Module):
         setattr(self, name, new)
 
     def _edit(self, optimizer, fn_param, fn_state) -> None:
-        for name in PARAM_NAMES:
+        for name in self.param_names():
             self._replace(optimizer, name, fn_param(getattr(self, name).detach()), fn_state)
 
     def prune(self, keep: torch.Tensor, optimizer=None) -> None:
@@ -145,7 +157,7 @@ class GaussianModel(nn.Module):
             extra = children.get(name, t[idx].repeat((n,) + (1,) * (t.ndim - 1)))
             return torch.cat([t, extra])
 
-        for name in PARAM_NAMES:  # parameter-specific children, then drop the parents
+        for name in self.param_names():  # parameter-specific children, then drop the parents
             old = getattr(self, name)
             self._replace(optimizer, name, param(old.detach(), name),
                            lambda s: torch.cat([s, torch.zeros((n_new,) + s.shape[1:], dtype=s.dtype, device=s.device)]))

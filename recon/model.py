@@ -19,7 +19,7 @@ import torch
 from scene_format.cameras import CameraTrajectory, Intrinsics
 from common.checkpoint import torch_load
 from common.fileio import atomic_output
-from recon.deform import DeformationField
+from recon.deform import DeformationField, make_field
 from recon.gaussians import GaussianModel
 from recon.raster import Camera, RenderOutput
 from recon.render import camera_from_pose, check_time, render_at, render_views
@@ -37,6 +37,7 @@ class ModelMeta:
     duration_us: int                  # clip length; t = t_us / duration_us
     deform_enabled: bool = False      # False until the warm-up has passed
     precision: str = "float32"        # the deformation's dtype (float32 | bfloat16) it trained and renders in
+    deform_field: dict = field(default_factory=lambda: {"kind": "mlp"})   # recon.deform.make_field's spec
     active_sh_degree: int = 0
     iteration: int = 0
     scene: str = ""
@@ -127,9 +128,11 @@ class DynamicGaussians:
         gaussians = GaussianModel(n, meta.sh_degree, meta.channels)
         if "anchors" in state["gaussians"]:
             gaussians.anchors = torch.zeros(n, 3)
+        if "motion" in state["gaussians"]:
+            gaussians.enable_motion(state["gaussians"]["motion"].shape[1])
         gaussians.load_state_dict(state["gaussians"])
         gaussians.active_sh_degree = meta.active_sh_degree
-        deform = DeformationField()
+        deform = make_field(meta.deform_field)
         deform.load_state_dict(state["deform"])
         cams = [CameraTrajectory(Intrinsics(**c["intrinsics"]), np.asarray(c["times_us"], np.int64),
                                  np.asarray(c["c2w_opencv"], np.float64)) for c in state.get("cameras", [])]

@@ -47,7 +47,7 @@ CACHE_FORMAT = "e4dgs-precision-cache/1"
 class PrecisionChoice:
     """What a run computes its deformation in, and why."""
     dtype: str                                   # float32 | bfloat16
-    source: str                                  # config (asked for) | measured | cached | cuda (auto on CUDA)
+    source: str          # config (asked for) | measured | cached | cuda (auto on CUDA) | trajectory (auto, no MLP)
     machine: str = ""                            # the cache key: CPU model, torch version, threads
     timings_ms: dict[str, float] = field(default_factory=dict)   # median ms of one fwd + bwd per dtype
 
@@ -57,7 +57,8 @@ class PrecisionChoice:
     def describe(self) -> str:
         """One line for the run's log: 'float32 (measured on AMD EPYC ...: float32 260 ms, bfloat16 3700 ms ...)'."""
         if not self.timings_ms:
-            why = {"config": "train.precision", "cuda": "auto on CUDA: float32"}.get(self.source, self.source)
+            why = {"config": "train.precision", "cuda": "auto on CUDA: float32",
+                   "trajectory": "auto with per-Gaussian trajectories: float32"}.get(self.source, self.source)
             return f"{self.dtype} ({why})"
         times = ", ".join(f"{k} {v:.0f} ms" for k, v in self.timings_ms.items())
         return (f"{self.dtype} ({self.source}: {times} per deformation forward + backward of {MEASURE_POINTS} "

@@ -60,7 +60,7 @@ def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float,
     if field is None or len(gaussians) == 0:
         return means, quats, log_scales
     with autocast(precision, means.device):
-        dx, dq, ds = field(gaussians.deformation_inputs(), t)
+        dx, dq, ds = field.deform(gaussians, t)
     return means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype)
 
 

@@ -34,7 +34,7 @@ from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock, write_text_atomic
 from recon import initial_points as initial
 from recon.config import TrainConfig
-from recon.deform import DeformationField
+from recon.deform import make_field
 from recon.event_init import carved_points
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
 from recon.device import run_placement
@@ -146,6 +146,8 @@ class Trainer:
     @functools.cached_property
     def precision(self) -> PrecisionChoice:
         """The deformation's dtype on this machine (train.precision; `auto` measured once per machine)."""
+        if self.tcfg.deform_field.kind == "trajectory" and self.tcfg.precision == "auto":
+            return PrecisionChoice("float32", "trajectory")       # a few products per Gaussian: nothing to gain
         return resolve_precision(self.tcfg.precision, self.device)
 
     # -- set-up -----------------------------------------------------------------------------------
@@ -160,10 +162,12 @@ class Trainer:
         gaussians = GaussianModel.from_points(pts, colors=colors, sh_degree=self.tcfg.sh_degree, channels=channels,
                                               init_opacity=self.tcfg.init.init_opacity)
         torch.manual_seed(self.tcfg.seed)
-        deform = DeformationField()
+        deform = make_field(self.tcfg.deform_field.spec())
+        if deform.kind == "trajectory":
+            gaussians.enable_motion(deform.n_basis)
         meta = ModelMeta(method=self.method.name, channels=channels, sh_degree=self.tcfg.sh_degree, background=bg,
                          extent=self.extent, duration_us=self.dataset.duration_us,
-                         precision=self.precision.dtype, scene=self.dataset.scene.name,
+                         precision=self.precision.dtype, deform_field=deform.spec(), scene=self.dataset.scene.name,
                          config=to_dict(self.cfg))
         model = DynamicGaussians(gaussians, deform, meta, self.dataset.cameras)
         self.method.setup_model(model)
@@ -188,8 +192,13 @@ class Trainer:
             {"params": [g.opacity_logits], "lr": lr.opacity, "name": "opacity"},
             {"params": [g.log_scales], "lr": lr.scaling, "name": "scaling"},
             {"params": [g.quats], "lr": lr.rotation, "name": "rotation"},
-            {"params": list(self.model.deform.parameters()), "lr": lr.position_init * lr.deform_scale, "name": "deform"},
-        ] + self.method.extra_parameters()
+        ]
+        if list(self.model.deform.parameters()):
+            groups.append({"params": list(self.model.deform.parameters()), "lr": lr.position_init * lr.deform_scale,
+                           "name": "deform"})
+        if g.motion is not None:
+            groups.append({"params": [g.motion], "lr": 0.0, "name": "motion"})
+        groups += self.method.extra_parameters()
         return torch.optim.Adam(groups, lr=0.0, eps=1e-15)
 
     def _update_lrs(self, it: int) -> None:
@@ -203,6 +212,10 @@ class Trainer:
             elif group["name"] == "deform":  # decays over the iterations after the warm-up
                 warm = self.sched.warm_up
                 group["lr"] = position_lr(it - warm, lr.position_init * lr.deform_scale, lr.position_final,
+                                          max(self.sched.deform_lr_steps - warm, 1))
+            elif group["name"] == "motion":  # trajectory coefficients: the means' rates, after the warm-up
+                warm, k = self.sched.warm_up, self.tcfg.deform_field.lr_scale * self.extent
+                group["lr"] = position_lr(it - warm, lr.position_init * k, lr.position_final * k,
                                           max(self.sched.deform_lr_steps - warm, 1))
 
     def next_index(self, n: int) -> int:
