@@ -1,0 +1,74 @@
+"""Learning curves of one method with the deformation MLP against per-Gaussian trajectories: PSNR and
+moving-pixel PSNR of each snapshot against training seconds.
+
+    python -m benchmark.field_curves --scene data/quick/hinge --method e4dgs \\
+        --config configs/recon/bench/e4dgs_quick.yaml [--fields mlp trajectory] [--scale 1] [--set KEY=VALUE]
+
+Each field trains the same config (`train.deform_field.kind` set, `train.iterations` x --scale with
+the schedule scaled along, snapshots at 10 / 25 / 50 / 75 / 100 %) into --out/<method>_<field>; the
+runs resume and are reused like any training folder. Every snapshot is scored as the benchmark
+scores (recon.evaluate: the method's correction, whole images and the scene's dynamic masks).
+Writes curves.json and prints a Markdown table with the CPU named.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+SNAPSHOTS = [0.1, 0.25, 0.5, 0.75, 1.0]
+
+
+def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict) -> list[dict]:
+    import recon
+    from scene_format.reader import SceneDataset
+
+    base = recon.resolve_config(method, config)
+    iters = max(1, int(round(base.train.iterations * scale)))
+    overrides = {"train.deform_field.kind": field, "train.snapshots": SNAPSHOTS, "train.iterations": iters, **sets}
+    if scale != 1:
+        overrides.update({"train.scale_schedule": True, "train.schedule_reference": base.train.iterations})
+    result = recon.fit(scene, method, config, out / f"{method}_{field}", overrides=overrides, progress=False,
+                        keep_initial=True)
+    dataset = SceneDataset(scene)
+    points = []
+    for row in result.log:
+        if "snapshot" in row:
+            s = recon.evaluate(recon.load(result.run_dir / row["snapshot"]), dataset)
+            points.append({"iteration": row["iteration"], "wall_s": row["wall_s"], "psnr": s["psnr"],
+                           "psnr_dyn": s.get("psnr_dyn"), "n_gaussians": row["n_gaussians"]})
+    floor = recon.evaluate(result.initial, dataset)        # the untrained model the run starts from
+    return [{"iteration": 0, "wall_s": 0.0, "psnr": floor["psnr"], "psnr_dyn": floor.get("psnr_dyn"),
+             "n_gaussians": len(result.initial)}] + points
+
+
+def main(argv=None) -> int:
+    from common.config import parse_set
+    from common.machine import cpu_summary
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scene", required=True)
+    ap.add_argument("--method", required=True)
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--fields", nargs="+", default=["mlp", "trajectory"], choices=["mlp", "trajectory"])
+    ap.add_argument("--scale", type=float, default=1.0, help="budget multiple of the config's iterations")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--out", default="runs/field_curves")
+    args = ap.parse_args(argv)
+    sets = parse_set(args.set)
+    out = Path(args.out) / Path(args.scene).name
+    results = {field: curve(args.scene, args.method, args.config, field, args.scale, out, sets) for field in args.fields}
+    (out / f"{args.method}_curves.json").write_text(json.dumps({"cpu": cpu_summary(), "scene": args.scene,
+                                                                 "method": args.method, "curves": results}, indent=1))
+    print(f"{args.method} on {Path(args.scene).name}, CPU {cpu_summary()}")
+    print("| field | iteration | train s | PSNR | moving-pixel PSNR | Gaussians |\n|---|---:|---:|---:|---:|---:|")
+    for field, points in results.items():
+        for p in points:
+            dyn = "–" if p["psnr_dyn"] is None else f"{p['psnr_dyn']:.2f}"
+            print(f"| {field} | {p['iteration']} | {p['wall_s']:.0f} | {p['psnr']:.2f} | {dyn} | {p['n_gaussians']} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
