@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from common.argtypes import add_ray_arguments, ray_options
+from common.argtypes import add_ray_arguments, name_list, ray_options
 
 
 def add_bench_parser(sub) -> None:
@@ -13,10 +13,10 @@ def add_bench_parser(sub) -> None:
                                    "finished ones), scores held-out views, and writes runs/<preset>/results.jsonl, "
                                    "leaderboard.md/.csv, accuracy_vs_time.png/.md, blur.md and ablation.md.")
     p.add_argument("--preset", default="quick", help="quick | paper, or a bench YAML file (default quick)")
-    p.add_argument("--scenes", default=None, help="comma-separated subset of the preset's scenes")
-    p.add_argument("--methods", default=None, help="comma-separated subset of the preset's cells (quick: d3dgs_sharp, "
+    p.add_argument("--scenes", type=name_list, default=None, help="comma-separated subset of the preset's scenes")
+    p.add_argument("--methods", type=name_list, default=None, help="comma-separated subset of the preset's cells (quick: d3dgs_sharp, "
                                                    "d3dgs_blur, deblur_d3dgs, e2vid_d3dgs, e4dgs, e4dgs_rgb)")
-    p.add_argument("--studies", default="main,blur,ablation",
+    p.add_argument("--studies", type=name_list, default="main,blur,ablation",
                    help="which studies to run: main, blur, ablation, speed (default main,blur,ablation; the speed "
                         "study runs only when named, as `make speed-study`)")
     p.add_argument("--ablation-seeds", default=None,
@@ -114,8 +114,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: --ablation-seeds: expected distinct integers >= 0 separated by commas "
                              f"({exc})") from None
     out = args.out or Path("runs") / name
-    split = lambda s: [x.strip() for x in s.split(",") if x.strip()] if s else None  # noqa: E731
-    scenes, cells = split(args.scenes), split(args.methods)
+    scenes, cells = args.scenes, args.methods
     for s in scenes or []:
         if s not in cfg.scenes:
             raise SystemExit(f"error: --scenes: {s!r} is not in preset {name!r} ({', '.join(cfg.scenes)})")
@@ -124,7 +123,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: --methods: {c!r} is not a cell of preset {name!r} ({', '.join(cfg.cells)})")
     header = report_header(name, cfg)
     if not args.report:
-        studies = tuple(split(args.studies) or ())
+        studies = tuple(args.studies)
         unknown = [st for st in studies if st not in ("main", "blur", "ablation", "speed")]
         if unknown:
             raise SystemExit(f"error: --studies: {', '.join(map(repr, unknown))} is not a study (main, blur, ablation, speed)")

@@ -29,6 +29,27 @@ def nonnegative_int(text: str) -> int:
     return value
 
 
+SEED_MAX = 2 ** 63 - 1      # what the generators take and HDF5 / JSON store as a 64-bit integer
+
+
+def seed_int(text: str) -> int:
+    """A random seed: an integer in 0 .. 2^63 - 1."""
+    value = _number(int, text)
+    if not 0 <= value <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"expected an integer seed in 0 .. {SEED_MAX}, got {text!r}")
+    return value
+
+
+def name_list(text: str) -> list[str]:
+    """A comma-separated list of names (scenes, cells, studies): at least one, none blank."""
+    names = [x.strip() for x in text.split(",")]
+    if not any(names):
+        raise argparse.ArgumentTypeError(f"expected one or more comma-separated names, got {text!r}")
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"a blank name between commas in {text!r}")
+    return names
+
+
 def positive_float(text: str) -> float:
     value = _number(float, text)
     if value <= 0:

@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import add_ray_arguments, positive_int, ray_options
+from common.argtypes import add_ray_arguments, name_list, positive_int, ray_options
 
 
 def add_dataset_parser(sub) -> None:
@@ -13,7 +13,7 @@ def add_dataset_parser(sub) -> None:
                        description="Render, simulate and write every scene of a preset. Each scene runs in its own "
                                    "process; finished scenes are skipped and killed ones resume.")
     p.add_argument("--preset", default="quick", help="quick | paper | tiny, or a preset YAML file (default quick)")
-    p.add_argument("--scenes", default=None, help="comma-separated subset of the preset's scenes")
+    p.add_argument("--scenes", type=name_list, default=None, help="comma-separated subset of the preset's scenes")
     p.add_argument("--out", type=Path, default=None, help="dataset root (default data/<preset>)")
     p.add_argument("--jobs", type=positive_int, default=1, help="scenes generated side by side (default 1)")
     p.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
@@ -62,13 +62,13 @@ def run_dataset(args: argparse.Namespace) -> int:
 
     scene_args = None
     if args.scene_file or args.scene_config:
-        if args.scenes:
+        if args.scenes is not None:
             raise SystemExit("error: --scenes picks the preset's scenes; it cannot be combined with --scene-file "
                              "or --scene-config")
         scene_args = own_scene_args(args.scene_file or [], args.scene_config or [], args.kind)
         scenes = list(scene_args)
     else:
-        wanted = [s.strip() for s in args.scenes.split(",") if s.strip()] if args.scenes else None
+        wanted = args.scenes
         scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
     failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every, ray=ray_options(args),
@@ -144,12 +144,13 @@ def run_check(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from scene_format.verify import scene_dirs, verify_scene
+    from scene_format.verify import other_dirs, scene_dirs, verify_scene
 
     scenes = scene_dirs(args.path)
-    if not scenes:
+    unfinished, others = other_dirs(args.path)
+    if not scenes and not unfinished:
         raise no_dataset_at(args.path)
-    failed = 0
+    failed = len(unfinished)
     for d in scenes:
         try:
             n = len(json.loads((d / "manifest.json").read_text()).get("files", {}))
@@ -164,4 +165,9 @@ def run_check(args: argparse.Namespace) -> int:
                 print(f"  {line}")
         else:
             print(f"{d}: OK ({n} files match the manifest)")
+    for d in unfinished:
+        print(f"{d}: not a finished scene: no manifest.json (its generation did not finish; run the same "
+              "`e4dgs dataset` again to resume it)")
+    for d in others:
+        print(f"{d}: skipped, not a scene folder (no manifest.json, scene.yaml, cameras.json or events/)")
     return 1 if failed else 0

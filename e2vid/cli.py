@@ -3,9 +3,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from common.argtypes import nonnegative_int, positive_float, positive_int
+
+MIN_EVENTS_PER_WINDOW = 100     # fewer than this per window is noise, and a run of hours
+LONG_RUN_WINDOWS = 2000         # more windows than this: say how long it will take before starting
 
 
 def add_train_e2vid_parser(sub) -> None:
@@ -62,9 +66,29 @@ def add_e2vid_parser(sub) -> None:
     p.add_argument("--events", type=Path, required=True, help="event file, e.g. data/quick/lego/events/cam0.h5")
     p.add_argument("--out", type=Path, required=True, help="output folder for frames")
     p.add_argument("--weights", type=Path, default=None, help="network file (default: the shipped weights)")
-    p.add_argument("--dt-ms", type=positive_float, default=None, help="one frame every DT ms (default: 30 frames over the stream)")
-    p.add_argument("--events-per-window", type=nonnegative_int, default=0, help="split windows holding more events (0: never)")
+    p.add_argument("--dt-ms", type=positive_float, default=None,
+                   help="one frame every DT ms, at least 0.001 (timestamps are whole microseconds); the last frame "
+                        "is at the stream's end (default: 30 frames over the stream)")
+    p.add_argument("--events-per-window", type=nonnegative_int, default=0,
+                   help=f"split windows holding more events (0: never; else at least {MIN_EVENTS_PER_WINDOW})")
     p.set_defaults(func=run_e2vid)
+
+
+def estimated_seconds(net, width: int, height: int, n_windows: int) -> float:
+    """n_windows x the measured time of one network pass at this size (the second of two)."""
+    import time
+
+    import torch
+
+    from e2vid.networks import Reconstructor
+
+    recon = Reconstructor(net)
+    x = torch.zeros(net.cfg.num_bins, height, width)
+    with torch.no_grad():
+        recon(x)
+        t = time.perf_counter()
+        recon(x)
+    return n_windows * (time.perf_counter() - t)
 
 
 def run_e2vid(args: argparse.Namespace) -> int:
@@ -72,7 +96,7 @@ def run_e2vid(args: argparse.Namespace) -> int:
 
     from e2vid.networks import Reconstructor
     from e2vid.official import CheckpointError, load_checkpoint
-    from e2vid.reconstruct import reconstruct_frames
+    from e2vid.reconstruct import frame_times_us, reconstruct_frames
     from e2vid.weights import default_weights_path
     from common.fileio import write_text_atomic
     from common.imageio import write_png
@@ -87,9 +111,20 @@ def run_e2vid(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {exc}") from None
     if len(stream) == 0:
         raise SystemExit(f"error: {args.events}: no events")
+    if args.dt_ms is not None and args.dt_ms < 0.001:
+        raise SystemExit(f"error: --dt-ms {args.dt_ms:g}: below the event timestamps' resolution of 1 us "
+                         "(the smallest interval is 0.001)")
+    if 0 < args.events_per_window < MIN_EVENTS_PER_WINDOW:
+        raise SystemExit(f"error: --events-per-window {args.events_per_window}: a window must hold at least "
+                         f"{MIN_EVENTS_PER_WINDOW} events for the network to see anything (0: never split)")
     t0, t1 = int(stream.t_us[0]), int(stream.t_us[-1])
-    step = args.dt_ms * 1000 if args.dt_ms else max((t1 - t0) / 30, 1)
-    times = np.arange(t0 + step, t1 + step, step).astype(np.int64)
+    times = frame_times_us(t0, t1, args.dt_ms * 1000 if args.dt_ms else None)
+    n_windows = len(times) + (len(stream) // args.events_per_window if args.events_per_window else 0)
+    if n_windows > LONG_RUN_WINDOWS:
+        seconds = estimated_seconds(net, stream.width, stream.height, n_windows)
+        print(f"e4dgs e2vid: warning: {n_windows:,} windows, about {seconds / 60:.0f} min at the measured "
+              f"{1e3 * seconds / n_windows:.0f} ms each; a larger --dt-ms or --events-per-window is faster "
+              "(Ctrl-C stops it)", file=sys.stderr)
     frames = reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height, times,
                                 args.events_per_window or None, net.cfg.num_bins, progress=True)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -21,6 +21,18 @@ from e2vid.networks import Reconstructor
 from e2vid.voxel import normalize_voxel, voxel_grid_events
 
 
+def frame_times_us(t0_us: int, t1_us: int, step_us: float | None = None, n_frames: int = 30) -> np.ndarray:
+    """Output times [K] int64 over a stream from t0_us to t1_us: every step_us from t0_us + step_us,
+    the last at t1_us (a shorter final window, so no event is left out); without a step, n_frames
+    evenly spaced, the last at t1_us."""
+    if t1_us <= t0_us:
+        return np.array([t1_us], np.int64)
+    if step_us is None:
+        return np.unique(np.round(t0_us + (t1_us - t0_us) * np.arange(1, n_frames + 1) / n_frames).astype(np.int64))
+    inner = np.round(t0_us + step_us * np.arange(1, int(math.ceil((t1_us - t0_us) / step_us)))).astype(np.int64)
+    return np.unique(np.concatenate([inner[inner < t1_us], [t1_us]]))
+
+
 def split_windows(t_us: np.ndarray, t_out_us: np.ndarray, events_per_window: int | None) -> Iterator[tuple[int, int, int]]:
     """Yield (i0, i1, k): events [i0, i1) form a window, k >= 0 when frame k is due after it, else -1."""
     t_out_us = np.asarray(t_out_us, np.int64)

@@ -5,6 +5,7 @@ import numpy as np
 import torch
 
 from recon.deform import DeformationField
+from scene_format.cameras import rigid_pose_problem
 from recon.gaussians import GaussianModel
 from recon.precision import autocast
 from recon.raster import Camera, RenderOutput, render
@@ -23,8 +24,9 @@ def check_camera(K, c2w_opencv, width, height) -> tuple[np.ndarray, np.ndarray]:
     if c2w.shape != (4, 4) or not np.all(np.isfinite(c2w)):
         raise ValueError(f"camera: the pose must be a finite 4x4 camera-to-world matrix, got shape {c2w.shape}"
                          + (" with NaN or inf" if c2w.shape == (4, 4) else ""))
-    if abs(np.linalg.det(c2w[:3, :3])) < 1e-9:
-        raise ValueError("camera: the pose's rotation part is singular")
+    problem = rigid_pose_problem(c2w)
+    if problem:
+        raise ValueError(f"camera: the pose (c2w_opencv): {problem}")
     if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer)) and width > 0 and height > 0):
         raise ValueError(f"camera: width and height must be positive integers, got {width!r} x {height!r}")
     return K, c2w

@@ -167,6 +167,26 @@ class CameraTrajectory:
         return interpolate_pose(self.times_us, self.c2w, t_us)
 
 
+RIGID_TOL = 1e-4     # |R^T R - I|, |det R - 1| and the last row's deviation from 0 0 0 1 (poses are float32-exact)
+
+
+def rigid_pose_problem(c2w: np.ndarray, tol: float = RIGID_TOL) -> str | None:
+    """What makes c2w [..., 4, 4] not a rigid camera-to-world pose (orthonormal rotation with determinant
+    +1, last row 0 0 0 1, within tol), or None when every pose is rigid."""
+    c2w = np.asarray(c2w, np.float64)
+    R = c2w[..., :3, :3]
+    ortho = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max(axis=(-1, -2))
+    det = np.linalg.det(R)
+    row = np.abs(c2w[..., 3, :] - np.array([0.0, 0.0, 0.0, 1.0])).max(axis=-1)
+    for bad, what in ((row > tol, "its last row is not 0 0 0 1"), (ortho > tol, "its rotation is not orthonormal "
+                      "(scaled or sheared)"), (det < 0, "its rotation is a reflection (determinant -1)")):
+        if np.any(bad):
+            where = np.argwhere(np.atleast_1d(bad))[0] if np.ndim(bad) else None
+            at = f" (pose {where.tolist() if len(where) > 1 else int(where[0])})" if where is not None else ""
+            return f"{what}{at}; a camera pose must be rigid to within {tol:g}"
+    return None
+
+
 def load_cameras(path: str | Path) -> list[CameraTrajectory]:
     """Read a dataset's cameras.json."""
     path = Path(path)
@@ -183,4 +203,7 @@ def load_cameras(path: str | Path) -> list[CameraTrajectory]:
         if cam.c2w.shape != (len(cam.times_us), 4, 4):
             raise ValueError(f"{path}: cameras[{k}].c2w_opencv: expected one 4x4 pose per timestamp, got shape "
                              f"{cam.c2w.shape} for {len(cam.times_us)} timestamps")
+        problem = rigid_pose_problem(cam.c2w)
+        if problem:
+            raise ValueError(f"{path}: cameras[{k}].c2w_opencv: {problem}")
     return cams

@@ -23,6 +23,20 @@ def scene_dirs(path: Path) -> list[Path]:
     return sorted(p for p in path.iterdir() if (p / "manifest.json").is_file())
 
 
+SCENE_MARKS = ("scene.yaml", "cameras.json", "events", "frames", "blur")   # what a generation writes first
+
+
+def other_dirs(path: Path) -> tuple[list[Path], list[Path]]:
+    """The sub-folders of a dataset root without a manifest: (unfinished: holding what a scene
+    generation writes, so a scene whose generation has not finished; others: not scene folders)."""
+    if (path / "manifest.json").is_file() or not path.is_dir():
+        return [], []
+    rest = sorted(p for p in path.iterdir() if p.is_dir() and not p.name.startswith(".")
+                  and not (p / "manifest.json").is_file())
+    unfinished = [p for p in rest if any((p / m).exists() for m in SCENE_MARKS)]
+    return unfinished, [p for p in rest if p not in unfinished]
+
+
 def verify_scene(scene_dir: Path, progress: Callable[[str], None] | None = None) -> list[str]:
     """Problems found in one scene (each names the file and what differs); [] when it matches."""
     manifest_path = scene_dir / "manifest.json"

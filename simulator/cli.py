@@ -5,7 +5,7 @@ import argparse
 import re
 from pathlib import Path
 
-from common.argtypes import positive_float, positive_int
+from common.argtypes import positive_float, positive_int, seed_int
 
 IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 
@@ -30,6 +30,12 @@ def check_no_gaps(files: list[Path]) -> None:
     """With --fps, frame k is timed k / fps: a missing number in a numbered sequence would shift every
     later frame by one period, so it is an error (names without numbers are taken in order)."""
     numbers = [re.search(r"(\d+)$", f.stem) for f in files]
+    if any(numbers) and not all(numbers):       # frame10, frame_a: no order by number covers both
+        numbered = next(f for f, m in zip(files, numbers) if m)
+        other = next(f for f, m in zip(files, numbers) if not m)
+        raise SystemExit(f"error: --frames {numbered.parent}: {numbered.name} ends in a frame number but {other.name} "
+                         "does not, so the frames have no order by number; name every frame with a (zero-padded) "
+                         "number, or give --timestamps")
     if not all(numbers):
         return
     values = [int(m.group(1)) for m in numbers]
@@ -75,7 +81,7 @@ def add_simulate_parser(sub) -> None:
                                              "0.5s); may be negative (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
     p.add_argument("--config", type=Path, help="simulator config YAML (default: noise-free, C = 0.2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
+    p.add_argument("--seed", type=seed_int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
     p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
                    help="save a resumable checkpoint every N frames (default 500)")
     p.set_defaults(func=run_simulate)

@@ -414,3 +414,32 @@ def test_train_config_rejects_bad_values_naming_the_field(key, value):
     from common.config import ConfigError, build_config
     with pytest.raises(ConfigError, match=key):
         build_config(E2VIDTrainConfig, None, {key: value})
+
+
+def test_frame_times_cover_the_stream_and_end_at_its_last_event():
+    from e2vid.reconstruct import frame_times_us
+
+    default = frame_times_us(100, 19_800)
+    assert len(default) == 30 and default[-1] == 19_800 and np.all(np.diff(default) > 0)
+    np.testing.assert_array_equal(frame_times_us(0, 19_700, 5000), [5000, 10_000, 15_000, 19_700])
+    np.testing.assert_array_equal(frame_times_us(0, 20_000, 5000), [5000, 10_000, 15_000, 20_000])
+    np.testing.assert_array_equal(frame_times_us(0, 5, 1.5), [2, 3, 4, 5])      # rounded to whole us, distinct
+    np.testing.assert_array_equal(frame_times_us(7, 7), [7])
+
+
+def test_e2vid_refuses_steps_below_a_microsecond_and_warns_before_long_runs(motion_scene, tmp_path, capsys,
+                                                                           monkeypatch):
+    import e2vid.cli
+    from e4dgs.cli import main
+
+    ev = str(motion_scene / "events" / "cam0.h5")
+    for args, words in ((["--dt-ms", "0.0001"], "below the event timestamps' resolution of 1 us"),
+                        (["--events-per-window", "1"], "at least 100 events")):
+        with pytest.raises(SystemExit, match=words):
+            main(["e2vid", "--events", ev, "--out", str(tmp_path / "v"), *args])
+        assert not (tmp_path / "v").exists()
+    monkeypatch.setattr(e2vid.cli, "LONG_RUN_WINDOWS", 30)      # the real bound is 2,000 windows
+    assert main(["e2vid", "--events", ev, "--out", str(tmp_path / "w"), "--dt-ms", "0.5"]) == 0
+    err = capsys.readouterr().err
+    n = len((tmp_path / "w" / "timestamps.txt").read_text().split())
+    assert f"warning: {n:,} windows, about" in err and "ms each" in err and n > 30

@@ -107,7 +107,7 @@ def test_render_refuses_colliding_names_negative_indices_and_impossible_cameras(
     bad_pose = np.eye(4)
     bad_pose[0, 3] = np.nan
     for K, pose, words in ((np.eye(4), np.eye(4), "K must be a finite 3x3"), (np.eye(3), bad_pose, "NaN or inf"),
-                           (np.eye(3), np.eye(3), "4x4 camera-to-world"), (np.eye(3), np.zeros((4, 4)), "singular")):
+                           (np.eye(3), np.eye(3), "4x4 camera-to-world"), (np.eye(3), np.zeros((4, 4)), "last row is not 0 0 0 1")):
         with pytest.raises(ValueError, match=words):
             camera_from_pose(K, pose, 64, 48)
 
@@ -375,3 +375,83 @@ def test_simulate_names_a_frame_rate_beyond_microseconds_and_an_output_under_a_f
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frames", "note.txt"]
     rc, err = cli(["simulate", "--frames", frames, "--fps", "1e6", "--out", tmp_path / "ok.h5"], capsys)
     assert rc == 0, err                                        # 1 us apart is still whole microseconds
+
+
+def test_camera_poses_must_be_rigid_in_every_reader(tmp_path):
+    """A rotation scaled by 2, a reflection or a projective last row is refused (render --camera, the
+    API and a dataset's cameras.json), naming what is wrong and the tolerance."""
+    import json
+
+    from recon.render import camera_from_pose
+    from scene_format.cameras import RIGID_TOL, load_cameras, rigid_pose_problem
+
+    K = np.array([[60.0, 0, 32], [0, 60, 24], [0, 0, 1]])
+    scaled, mirrored, projective = np.eye(4), np.eye(4), np.eye(4)
+    scaled[:3, :3] *= 2
+    mirrored[0, 0] = -1
+    projective[3, 0] = 0.5
+    nearly = np.eye(4)
+    nearly[:3, :3] *= 1 + 0.1 * RIGID_TOL                      # within the tolerance: accepted
+    assert rigid_pose_problem(nearly) is None and rigid_pose_problem(np.stack([np.eye(4)] * 3)) is None
+    for pose, words in ((scaled, "not orthonormal"), (mirrored, "reflection"), (projective, "last row")):
+        with pytest.raises(ValueError, match=f"{words}.*rigid to within"):
+            camera_from_pose(K, pose, 64, 48)
+    # a dataset's cameras.json: the camera and the pose index are named
+    poses = np.stack([np.eye(4), scaled])
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps({"intrinsics": {"width": 64, "height": 48, "fx": 60.0, "fy": 60.0, "cx": 32.0, "cy": 24.0},
+                                "cameras": [{"timestamps_us": [0, 10], "c2w_opencv": poses.tolist()}]}))
+    with pytest.raises(ValueError, match=r"cameras\[0\]\.c2w_opencv: its rotation is not orthonormal .*pose 1"):
+        load_cameras(path)
+
+
+def test_seeds_scene_lists_and_frame_names_that_cannot_be_meant_are_refused(tmp_path, capsys):
+    import cv2
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for name in ("frame9", "frame10", "frame_a", "frame_b"):
+        cv2.imwrite(str(frames / f"{name}.png"), np.full((8, 8), 128, np.uint8))
+    rc, err = cli(["simulate", "--frames", frames, "--fps", "3000", "--out", tmp_path / "ev.h5"], capsys)
+    assert rc == 1 and "frame10.png ends in a frame number but frame_a.png does not" in err
+    assert not (tmp_path / "ev.h5").exists()
+    for args, words in ((["simulate", "--frames", str(frames), "--fps", "3000", "--out", str(tmp_path / "ev.h5"),
+                          "--seed", "99999999999999999999999"], "--seed: expected an integer seed in 0 .. 9223372036854775807"),
+                        (["simulate", "--frames", str(frames), "--fps", "3000", "--out", str(tmp_path / "ev.h5"),
+                          "--seed", "-1"], "--seed: expected an integer seed"),
+                        (["dataset", "--preset", "tiny", "--scenes", "", "--out", str(tmp_path / "d")],
+                         "--scenes: expected one or more comma-separated names"),
+                        (["dataset", "--preset", "tiny", "--scenes", " , ", "--out", str(tmp_path / "d")],
+                         "--scenes: expected one or more"),
+                        (["bench", "--preset", "tiny", "--scenes", "cubes,,x", "--out", str(tmp_path / "b")],
+                         "--scenes: a blank name between commas"),
+                        (["bench", "--preset", "tiny", "--methods", "", "--out", str(tmp_path / "b")], "--methods: expected")):
+        rc, err = cli(args, capsys)
+        assert rc == 2 and words in err, (args, err)
+    assert not (tmp_path / "d").exists() and not (tmp_path / "b").exists()
+
+
+def test_check_names_an_unfinished_scene_and_folders_that_are_not_scenes(motion_scene, tmp_path, capsys):
+    import shutil
+
+    root = tmp_path / "root"
+    shutil.copytree(motion_scene, root / "a")
+    shutil.copytree(motion_scene, root / "b")
+    (root / "b" / "manifest.json").unlink()              # a generation that did not finish
+    (root / "logs").mkdir()                              # not a scene at all
+    def check(path):
+        try:
+            rc = main(["check", str(path)])
+        except SystemExit as exc:
+            rc = exc.code if isinstance(exc.code, int) else 1
+            print(exc.code, file=sys.stderr)
+        captured = capsys.readouterr()
+        return rc, captured.out + captured.err
+    rc, out = check(root)
+    assert rc == 1 and f"{root / 'a'}: OK" in out and f"{root / 'b'}: not a finished scene: no manifest.json" in out
+    assert f"{root / 'logs'}: skipped, not a scene folder" in out
+    shutil.rmtree(root / "b")
+    rc, out = check(root)
+    assert rc == 0 and "not a finished scene" not in out
+    rc, out = check(root / "logs")       # a folder with nothing of a dataset: refused as before
+    assert rc == 1 and "no manifest.json in it or in its sub-folders" in out
