@@ -9,6 +9,7 @@ prefixes it with the file and the path of the enclosing key.
 from __future__ import annotations
 
 import copy
+import math
 
 import dataclasses
 import os
@@ -98,10 +99,16 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         return value
     if tp is float:
         if isinstance(value, str) and _YAML11_EXPONENT.fullmatch(value.strip()):
-            return float(value)  # PyYAML (YAML 1.1) reads 1e-4 (no dot) as a string
+            value = float(value)  # PyYAML (YAML 1.1) reads 1e-4 (no dot) as a string
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{path}: expected a number, got {_describe(value)}")
-        return float(value)
+        try:
+            value = float(value)
+        except OverflowError:                       # an integer beyond any float
+            raise ConfigError(f"{path}: expected a finite number, got an integer of {len(str(value))} digits") from None
+        if not math.isfinite(value):               # .inf / .nan: no quantity of a config is infinite
+            raise ConfigError(f"{path}: expected a finite number, got {value!r}")
+        return value
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"{path}: expected a string, got {_describe(value)}")

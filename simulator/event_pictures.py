@@ -14,6 +14,7 @@ ON_RGB = np.array([220, 40, 40], np.float64)    # red
 OFF_RGB = np.array([40, 80, 220], np.float64)   # blue (mirror of ON, so a tie is neutral)
 BACKGROUND_RGB = np.array([255, 255, 255], np.float64)
 
+MAX_TIME_US = 2 ** 62          # microsecond timestamps are int64; keep room for offsets and sums
 _TIME_RE = re.compile(r"^\s*([-+]?[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(us|ms|s)?\s*$")
 
 
@@ -24,7 +25,10 @@ def parse_time_us(text: str) -> int:
     if not m:
         raise ValueError(f"cannot read time {text!r}: expected a number with optional unit us, ms or s")
     scale = {"us": 1, None: 1, "ms": 1_000, "s": 1_000_000}[m.group(2)]
-    return int(round(float(m.group(1)) * scale))
+    value = float(m.group(1)) * scale
+    if not abs(value) <= MAX_TIME_US:               # also inf / nan (1e400)
+        raise ValueError(f"time {text!r} is out of range: at most {MAX_TIME_US / 1e6:.3g} s either side of 0")
+    return int(round(value))
 
 
 def event_frame(stream: EventStream, saturate_count: int = 3) -> np.ndarray:

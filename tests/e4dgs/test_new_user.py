@@ -455,3 +455,18 @@ def test_check_names_an_unfinished_scene_and_folders_that_are_not_scenes(motion_
     assert rc == 0 and "not a finished scene" not in out
     rc, out = check(root / "logs")       # a folder with nothing of a dataset: refused as before
     assert rc == 1 and "no manifest.json in it or in its sub-folders" in out
+
+
+def test_numbers_that_overflow_or_are_infinite_are_refused_by_name():
+    import recon
+    from common.config import ConfigError
+    from simulator.event_pictures import parse_time_us
+
+    for text in ("1e400", "-1e400", "1e13s"):
+        with pytest.raises(ValueError, match="out of range"):
+            parse_time_us(text)
+    assert parse_time_us("-5ms") == -5000
+    for key, value in (("train.lr.position_init", float("inf")), ("train.lr.scaling", float("nan")),
+                       ("train.lr.feature", 10 ** 400)):
+        with pytest.raises(ConfigError, match=f"{key.split('.')[-1]}: expected a finite number"):
+            recon.resolve_config("d3dgs", overrides={key: value})
