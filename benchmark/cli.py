@@ -5,6 +5,7 @@ import argparse
 from pathlib import Path
 
 from common.argtypes import add_ray_arguments, name_list, ray_options
+from common.fileio import output_inside_input
 
 
 def add_bench_parser(sub) -> None:
@@ -79,6 +80,9 @@ def run_score(args: argparse.Namespace) -> int:
     from benchmark.score import append_rows, score_renders
 
     out = args.out or Path("runs") / args.data.resolve().name
+    inside = output_inside_input(out, {"--data": args.data, "--renders": args.renders})
+    if inside:
+        raise SystemExit(f"error: --out {inside}")
     cfg = name = None
     if (out / "bench.json").exists():           # the preset the results belong to: its cells, labels, LPIPS
         name = json.loads((out / "bench.json").read_text()).get("preset")
@@ -114,6 +118,9 @@ def run_bench_cli(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: --ablation-seeds: expected distinct integers >= 0 separated by commas "
                              f"({exc})") from None
     out = args.out or Path("runs") / name
+    inside = output_inside_input(out, {"--data": args.data or Path("data") / cfg.dataset})
+    if inside:
+        raise SystemExit(f"error: --out {inside}")
     scenes, cells = args.scenes, args.methods
     for s in scenes or []:
         if s not in cfg.scenes:

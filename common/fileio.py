@@ -135,3 +135,14 @@ def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
             os.link(f, target)
         except OSError:
             shutil.copy2(f, target)
+
+
+def output_inside_input(output: str | os.PathLike, inputs: dict[str, str | os.PathLike]) -> str | None:
+    """A message when `output` is, or lies inside, one of `inputs` ({what: path}), else None: writing
+    there would change an input (a run inside its dataset, which `e4dgs check` would not notice)."""
+    out = Path(output).resolve()
+    for what, path in inputs.items():
+        src = Path(path).resolve()
+        if out == src or src in out.parents:
+            return f"{output}: inside {what} {path}; an output must not be written into its input, choose another folder"
+    return None

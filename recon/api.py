@@ -15,6 +15,7 @@ from typing import Any, Callable, Mapping
 
 from scene_format.reader import SceneDataset
 from common.config import build_config, parse_set, set_dotted  # noqa: F401  (parse_set, set_dotted re-exported)
+from common.fileio import output_inside_input
 from recon.methods import get_method
 from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)
 from recon.trainer import Trainer
@@ -67,6 +68,9 @@ def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_di
     dataset = SceneDataset(scene_dir)
     cfg = resolve_config(method, config, overrides)
     out = Path(out_dir) if out_dir is not None else Path("runs") / dataset.dir.name / method
+    inside = output_inside_input(out, {"the scene folder": dataset.dir})
+    if inside:
+        raise ValueError(f"out_dir: {inside}")
     if out_dir is None and (out / "model.pt").exists():
         print(f"fit: {out} holds a finished {method} model of this scene: it is returned as it is "
               "(give out_dir for a new run)")

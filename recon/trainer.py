@@ -15,6 +15,7 @@ A method supplies the loss (`Method.step`) and its data; the trainer does the re
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 from dataclasses import replace
@@ -307,8 +308,30 @@ class Trainer:
     def run(self) -> DynamicGaussians:
         """Train to the budget (resuming a checkpoint), holding a lock on the output folder so two
         runs into one folder cannot interleave their checkpoints."""
+        fresh = not (self.out / "run.json").exists()
         with output_lock(self.out):
-            return self._run()
+            try:
+                return self._run()
+            except BaseException:
+                if fresh:
+                    self._remove_unresumable()
+                raise
+
+    def _remove_unresumable(self) -> None:
+        """After a failure of a run that started here and saved no checkpoint (nothing to resume), remove
+        what it wrote, so that no folder with a run.json but no model looks like a run."""
+        if (self.out / "checkpoint.pt").exists() or (self.out / "model.pt").exists():
+            return
+        for name in ("run.json", "config.yaml", "log.jsonl"):
+            (self.out / name).unlink(missing_ok=True)
+        snaps = self.out / "snapshots"
+        if snaps.is_dir():
+            for f in snaps.glob("*.pt"):
+                f.unlink()
+            with contextlib.suppress(OSError):
+                snaps.rmdir()
+        with contextlib.suppress(OSError):     # only if nothing else is in it (a user's own files stay)
+            self.out.rmdir()
 
     # -- the steps of one run --------------------------------------------------------------------
     def _start(self) -> None:

@@ -470,3 +470,23 @@ def test_numbers_that_overflow_or_are_infinite_are_refused_by_name():
                        ("train.lr.feature", 10 ** 400)):
         with pytest.raises(ConfigError, match=f"{key.split('.')[-1]}: expected a finite number"):
             recon.resolve_config("d3dgs", overrides={key: value})
+
+
+def test_an_output_inside_its_input_is_refused(motion_scene, tmp_path, capsys):
+    """train --out into the scene folder, bench / score --out into the dataset: refused before any write."""
+    import recon
+
+    before = sorted(p.relative_to(motion_scene) for p in Path(motion_scene).rglob("*"))
+    for out in (motion_scene, Path(motion_scene) / "run"):
+        rc, err = cli(["train", "--scene", motion_scene, "--out", out, "--set", "train.iterations=2"], capsys)
+        assert rc == 1 and "inside the scene folder" in err and "choose another folder" in err
+        with pytest.raises(ValueError, match="out_dir: .*inside the scene folder"):
+            recon.fit(motion_scene, "d3dgs", overrides={"train.iterations": 2}, out_dir=out, progress=False)
+    root = Path(motion_scene).parent
+    rc, err = cli(["bench", "--preset", "tiny", "--data", root, "--out", root / "results"], capsys)
+    assert rc == 1 and "inside --data" in err
+    rc, err = cli(["score", "--data", root, "--renders", tmp_path, "--name", "x", "--inputs", "rgb",
+                   "--out", tmp_path / "r"], capsys)
+    assert rc == 1 and "inside --renders" in err
+    assert sorted(p.relative_to(motion_scene) for p in Path(motion_scene).rglob("*")) == before
+    assert not (root / "results").exists() and not (tmp_path / "r").exists()

@@ -268,3 +268,28 @@ def test_fit_returns_a_typed_result_that_matches_its_folder(motion_scene, tmp_pa
     again = recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "r", progress=False, keep_initial=True)
     assert torch.equal(again.initial.gaussians.means, result.initial.gaussians.means)      # deterministic start
     assert torch.equal(again.model.gaussians.means, result.model.gaussians.means) and again.initial is not None
+
+
+def test_a_run_that_fails_before_its_first_checkpoint_leaves_nothing(motion_scene, tmp_path):
+    """Nothing to resume: run.json, config.yaml and the log are removed (a folder with a run.json but
+    no model looked like a run); a folder that held other files keeps them."""
+    cfg = {**FAST, "train.iterations": 20, "train.checkpoint_every": 10, "train.init.n_points_object": 200}
+
+    def fail_at_3(trainer, it):
+        if it == 3:
+            raise OSError("a truncated frame")
+    with pytest.raises(OSError, match="truncated"):
+        recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "run", progress=False, on_iteration=fail_at_3)
+    assert not (tmp_path / "run").exists() and list(tmp_path.iterdir()) == []
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    with pytest.raises(OSError, match="truncated"):
+        recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "mine", progress=False, on_iteration=fail_at_3)
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["notes.txt"]
+    # after a checkpoint the run is resumable and stays
+    def fail_at_12(trainer, it):
+        if it == 12:
+            raise OSError("a truncated frame")
+    with pytest.raises(OSError):
+        recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "later", progress=False, on_iteration=fail_at_12)
+    assert (tmp_path / "later" / "checkpoint.pt").exists() and (tmp_path / "later" / "run.json").exists()
