@@ -171,12 +171,15 @@ def to_dict(obj: Any) -> Any:
 
 
 class _StrictLoader(yaml.SafeLoader):
-    """safe_load that refuses a key written twice in one mapping (YAML would keep the last silently)."""
+    """safe_load that refuses a key written twice in one mapping (YAML would keep the last silently);
+    merge keys (`<<: *base`) work as in YAML, their keys overridden by the mapping's own."""
 
 
 def _no_duplicates(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
     seen: dict = {}
     for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":     # `<<: *base`: merged keys may be overridden below
+            continue
         key = loader.construct_object(key_node, deep=deep)
         if key in seen:
             raise yaml.constructor.ConstructorError(

@@ -84,3 +84,14 @@ def test_shipped_simulator_configs_load():
     for f in files:
         load_config(SimulatorConfig, f)
     assert load_config(SimulatorConfig, files[0].with_name("sim_ideal.yaml")) == SimulatorConfig()
+
+
+def test_yaml_merge_keys_work_and_duplicates_are_still_refused(tmp_path):
+    from common.config import read_yaml_mapping
+
+    path = tmp_path / "c.yaml"
+    path.write_text("base: &b\n  x: 1\n  y: 2\nother:\n  <<: *b\n  y: 3\n")
+    assert read_yaml_mapping(path) == {"base": {"x": 1, "y": 2}, "other": {"x": 1, "y": 3}}
+    path.write_text("other:\n  y: 2\n  y: 3\n")
+    with pytest.raises(ConfigError, match="'y' appears twice"):
+        read_yaml_mapping(path)
