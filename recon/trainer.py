@@ -49,6 +49,7 @@ from recon.dataset_views import gray_from_srgb
 from simulator.pixel import linear_to_srgb, rec709_luma
 
 CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
+BUNDLED_PACKAGES = ("recon", "benchmark", "e2vid")   # a method class defined elsewhere is a plug-in
 
 
 class TrainingError(RuntimeError):
@@ -355,7 +356,16 @@ class Trainer:
         g.active_sh_degree = min(cfg.sh_degree, it // sched.sh_interval)
         self.model.meta.active_sh_degree = g.active_sh_degree
         self.model.meta.deform_enabled = cfg.deform and it > sched.warm_up
-        loss, renders = self.method.step(self, it)
+        try:
+            loss, renders = self.method.step(self, it)
+        except (TrainingError, KeyboardInterrupt):
+            raise
+        except Exception as exc:      # a plug-in's own failure: name the plug-in (the bundled methods' stay as they are)
+            cls = type(self.method)
+            if cls.__module__.split(".")[0] in BUNDLED_PACKAGES:
+                raise
+            raise TrainingError(f"method {self.method.name!r} (plug-in class {cls.__module__}.{cls.__qualname__}): its "
+                                f"step raised {type(exc).__name__}: {exc} at iteration {it}") from exc
         loss_value = float(loss.detach())
         if not math.isfinite(loss_value):
             raise TrainingError(f"{self.method.name}: loss is {loss.item()} at iteration {it}; stopping "
@@ -441,6 +451,11 @@ class Trainer:
             if self.on_iteration is not None:
                 self.on_iteration(self, it)
         bar.close()
+        bad = [f"gaussians.{n}" for n, p in self.model.gaussians.named_parameters() if not torch.isfinite(p).all()]
+        bad += [f"deform.{n}" for n, p in self.model.deform.named_parameters() if not torch.isfinite(p).all()]
+        if bad:
+            raise TrainingError(f"{self.method.name}: training ended with non-finite values in {', '.join(bad)}; no model "
+                                "is saved (a learning rate too large?)")
         self.model.meta.iteration = self.iteration
         self.model.save(final)
         self._write_log()

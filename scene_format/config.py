@@ -4,6 +4,7 @@ written beside the data."""
 from __future__ import annotations
 
 import copy
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Mapping
@@ -207,6 +208,9 @@ class SourceConfig:
             raise ConfigError(f"frame_end: expected a frame after frame_start ({self.frame_start}), got {self.frame_end}")
 
 
+SCENE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,127}")
+
+
 @dataclass(frozen=True)
 class SceneConfig:
     name: str
@@ -227,6 +231,9 @@ class SceneConfig:
 
     def __post_init__(self):
         check_positive(self, "duration_s")
+        if not (isinstance(self.name, str) and SCENE_NAME.fullmatch(self.name)):
+            raise ConfigError(f"name: expected a folder name (letters, digits, and _ . + - after the first; no / "
+                              f"or leading dot), got {self.name!r}: the scene is written to <out>/<name>")
         if not self.speed >= 1:
             raise ConfigError(f"speed: expected a time compression factor >= 1, got {self.speed!r}")
         if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)

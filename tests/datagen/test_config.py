@@ -90,3 +90,14 @@ def test_blur_stack_means_equal_numpy_means(rng):
     assert set(done) == {0, 1, 2} and not stack.sums
     for key, (a, b) in windows.items():
         np.testing.assert_allclose(done[key], frames[a:b + 1].mean(0), rtol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "a/b", ".hidden", "", "a\\b"])
+def test_a_scene_name_must_be_a_plain_folder_name(name):
+    """The scene is written to <out>/<name>: a name with a path in it would write outside --out."""
+    from common.config import ConfigError, from_dict
+    from scene_format.config import SceneConfig
+
+    with pytest.raises(ConfigError, match="name: expected a folder name"):
+        from_dict(SceneConfig, {"name": name, "kind": "object"})
+    assert from_dict(SceneConfig, {"name": "hinge_x37.6", "kind": "object"}).name == "hinge_x37.6"

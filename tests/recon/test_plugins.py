@@ -115,3 +115,45 @@ def test_a_plugin_whose_name_differs_from_its_entry_point_or_lacks_inputs_is_ref
         with pytest.raises(registry.PluginError, match=words):
             registry.method_names()
     assert "no_inputs" not in registry.METHODS and "other" not in registry.METHODS
+
+
+def test_a_plugin_whose_step_raises_is_named(motion_scene, tmp_path, monkeypatch):
+    """A plug-in's failure is one TrainingError naming the method and its class, not an 'internal
+    error'; the cause stays chained for --debug."""
+    import recon
+    from recon.methods.d3dgs import D3DGS
+    from recon.trainer import TrainingError
+
+    class Broken(D3DGS):
+        name = "broken_d3dgs"
+
+        def step(self, trainer, it):
+            return 1 / 0
+
+    monkeypatch.setitem(registry.METHODS, "broken_d3dgs", Broken)
+    with pytest.raises(TrainingError, match=r"method 'broken_d3dgs' \(plug-in class .*Broken\): its step raised "
+                                            r"ZeroDivisionError: division by zero at iteration 1") as exc:
+        recon.fit(motion_scene, "broken_d3dgs", overrides=TINY, out_dir=tmp_path / "run", progress=False)
+    assert isinstance(exc.value.__cause__, ZeroDivisionError)
+    assert not (tmp_path / "run").exists()          # nothing to resume: nothing left behind
+
+
+def test_training_that_ends_with_non_finite_parameters_saves_no_model(motion_scene, tmp_path, monkeypatch):
+    import torch
+
+    import recon
+    from recon.trainer import Trainer, TrainingError
+
+    original = Trainer._optimise
+
+    def poisoned(self, it):
+        out = original(self, it)
+        if it == self.tcfg.iterations:
+            with torch.no_grad():
+                self.model.gaussians.sh_dc[0, 0, 0] = float("inf")
+        return out
+    monkeypatch.setattr(Trainer, "_optimise", poisoned)
+    with pytest.raises(TrainingError, match=r"non-finite values in gaussians\.sh_dc; no model is saved"):
+        recon.fit(motion_scene, "d3dgs", overrides={**TINY, "train.checkpoint_every": 5}, out_dir=tmp_path / "run",
+                  progress=False)
+    assert not (tmp_path / "run" / "model.pt").exists() and (tmp_path / "run" / "checkpoint.pt").exists()
