@@ -154,7 +154,7 @@ def run_view(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from simulator.event_file import EventFile
     from simulator.h5io import EventFileError
-    from simulator.event_pictures import annotate, event_frame, parse_time_us, save_video
+    from simulator.event_pictures import annotate, event_frame, parse_time_us, save_video, window_starts
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)
@@ -180,7 +180,7 @@ def run_view(args: argparse.Namespace) -> int:
             step = parse_time_us(args.step) if args.step else window
             if window <= 0 or step <= 0:
                 raise SystemExit("error: --window and --step must be positive")
-            starts = range(t0, max(t0 + 1, t1 - window + 1), step)
+            starts = window_starts(t0, t1, window, step)
             from tqdm import tqdm
 
             frames = [draw(ev.window(s, s + window), s, s + window)

@@ -31,6 +31,15 @@ def parse_time_us(text: str) -> int:
     return int(round(value))
 
 
+def window_starts(t0_us: int, t1_us: int, window_us: int, step_us: int) -> list[int]:
+    """Start times of a sliding window of window_us every step_us over [t0_us, t1_us): full windows, and
+    a last one ending at t1_us when the steps stop short of it, so that every event is shown."""
+    starts = list(range(t0_us, max(t0_us + 1, t1_us - window_us + 1), step_us))
+    if starts[-1] + window_us < t1_us:
+        starts.append(t1_us - window_us)
+    return starts
+
+
 def event_frame(stream: EventStream, saturate_count: int = 3) -> np.ndarray:
     """RGB uint8 [H,W,3]: white background, ON events red, OFF blue, mixed pixels blended.
 

@@ -490,3 +490,13 @@ def test_an_output_inside_its_input_is_refused(motion_scene, tmp_path, capsys):
     assert rc == 1 and "inside --renders" in err
     assert sorted(p.relative_to(motion_scene) for p in Path(motion_scene).rglob("*")) == before
     assert not (root / "results").exists() and not (tmp_path / "r").exists()
+
+
+def test_a_sliding_window_video_shows_the_last_events():
+    """`e4dgs view --window 5ms` on a 19.7 ms stream: four frames, the last one ending at the stream's end."""
+    from simulator.event_pictures import window_starts
+
+    assert window_starts(0, 19_700, 5000, 5000) == [0, 5000, 10_000, 14_700]
+    assert window_starts(0, 20_000, 5000, 5000) == [0, 5000, 10_000, 15_000]
+    assert window_starts(0, 3000, 5000, 5000) == [0]                   # a window longer than the stream
+    assert window_starts(100, 10_100, 4000, 2000) == [100, 2100, 4100, 6100]
