@@ -96,7 +96,7 @@ def test_view_png_and_mp4(exr_dir, tmp_path):
     reader = imageio_ffmpeg.read_frames(str(mp4))
     meta = next(reader)
     n = sum(1 for _ in reader)
-    assert n == 7  # windows starting at 0, 0.5, ..., 3.0 ms within the 3.667 ms stream
+    assert n == 8  # windows starting at 0, 0.5, ..., 3.0 ms, and the last one ending at the 3.667 ms stream's end
     assert meta["codec"] == "h264" and meta["size"] == (640, 24 * 20 + 18)    # what browsers play
     with pytest.raises(SystemExit, match="expected a .png or .mp4"):
         main(["view", str(ev), "--out", str(tmp_path / "x.gif")])
