@@ -13,7 +13,7 @@ def add_bench_parser(sub) -> None:
                        description="Builds the dataset if missing, trains each job (resuming killed ones, reusing "
                                    "finished ones), scores held-out views, and writes runs/<preset>/results.jsonl, "
                                    "leaderboard.md/.csv, accuracy_vs_time.png/.md, blur.md and ablation.md.")
-    p.add_argument("--preset", default="quick", help="quick | paper, or a bench YAML file (default quick)")
+    p.add_argument("--preset", default="quick", help=f"{' | '.join(preset_names())}, or a bench YAML file (default quick)")
     p.add_argument("--scenes", type=name_list, default=None, help="comma-separated subset of the preset's scenes")
     p.add_argument("--methods", type=name_list, default=None, help="comma-separated subset of the preset's cells (quick: d3dgs_sharp, "
                                                    "d3dgs_blur, deblur_d3dgs, e2vid_d3dgs, e4dgs, e4dgs_rgb)")
@@ -28,6 +28,14 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--no-progress", action="store_true")
     add_ray_arguments(p, "each (scene, cell) job (and any missing scene's generation)")
     p.set_defaults(func=run_bench_cli)
+
+
+def preset_names() -> list[str]:
+    """The bench presets shipped in configs/bench/ (quick first)."""
+    from benchmark.config import PRESET_DIR
+
+    names = sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+    return sorted(names, key=lambda n: (n != "quick", n))
 
 
 def report_header(name: str, cfg) -> str:

@@ -116,7 +116,7 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
     if machines:   # seconds mean something only beside the processor (and the deformation's dtype on it)
         md.write("Train times measured on: " + "; ".join(f"{cpu}, deformation in {prec}" for cpu, prec in machines) + ".\n")
     speeds = sorted({(labels.get(c, c), table[c][s]["speed"]) for c in cells for s in scenes
-                     if table[c].get(s, {}).get("speed") is not None})
+                     if table[c].get(s, {}).get("speed") not in (None, 1, 1.0)})      # x1 is the scene itself
     if speeds:
         md.write("Speed variants: " + "; ".join(f"{label} at x{sp:g}" for label, sp in speeds) + " (the same motion "
                  "x times faster; its blurred frames and its events). The others train on the scene at speed 1.\n")
@@ -241,7 +241,8 @@ def plot_accuracy_vs_time(rows: list[dict], path: Path, order: tuple[str, ...] =
         ax.set_xlabel("training wall-clock (s)")
         ax.set_ylabel("test PSNR (dB)")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
+    if axes[0][0].get_legend_handles_labels()[0]:      # a leaderboard without snapshots has no curve to name
+        axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)

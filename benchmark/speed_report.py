@@ -215,7 +215,8 @@ def plot_speed(rows: list[dict], path: Path, roles: SpeedRoles = SpeedRoles(), o
             ax2.plot([s for s, _ in blur], [b for _, b in blur], ":", color="grey", label="blur (median px)")
             ax2.set_ylabel("blur, median px (dotted)", color="grey")
         ax.set_xticks(speeds, [f"x{s:g}" for s in speeds], rotation=60, fontsize=7)
-    axes[0][0].legend(fontsize=6, loc="lower left")
+    if axes[0][0].get_legend_handles_labels()[0]:
+        axes[0][0].legend(fontsize=6, loc="lower left")
     fig.tight_layout()
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)

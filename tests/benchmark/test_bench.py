@@ -384,3 +384,31 @@ def test_results_rows_are_typed_where_they_are_read_and_written(tmp_path):
     with pytest.raises(ValueError, match=r"row 2 to write \(main/s/d3dgs_blur\): psnr"):
         write_results(path, [good, {**_row("main", "s", "d3dgs_blur", 1.0), "psnr": float("nan")}])
     assert json.loads(path.read_text()) == good          # nothing written when a row is wrong
+
+
+def test_report_names_the_cpu_and_only_real_speed_variants_and_plots_without_warnings(tmp_path):
+    import warnings
+
+    from benchmark.report import leaderboard, plot_accuracy_vs_time
+
+    rows = [{**_row("main", "a", cell, 20.0 + k), "speed": speed, "cpu": "AMD EPYC (avx2 fma)", "precision": "float32"}
+            for k, (cell, speed) in enumerate(zip(MAIN_CELLS, (None, 1.0, 37.6, 1, None, None)))]
+    md, _ = leaderboard(rows)
+    assert "Train times measured on: AMD EPYC (avx2 fma), deformation in float32." in md
+    speeds = next(line for line in md.splitlines() if line.startswith("Speed variants:"))
+    assert "x37.6" in speeds and "x1 " not in speeds and "x1;" not in speeds and speeds.count(" at x") == 1
+    md, _ = leaderboard([{**r, "speed": 1.0} for r in rows])
+    assert "Speed variants:" not in md                 # every cell on the scene itself: nothing to say
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                 # "No artists with labels found to put in legend"
+        plot_accuracy_vs_time([{**r, "snapshots": []} for r in rows], tmp_path / "a.png")
+    assert (tmp_path / "a.png").stat().st_size > 1000
+
+
+def test_bench_help_lists_every_shipped_preset(capsys):
+    from e4dgs.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "quick | paper | paper_gpu | tiny, or a bench YAML file" in text
