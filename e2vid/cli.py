@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from pathlib import Path
@@ -127,9 +128,19 @@ def run_e2vid(args: argparse.Namespace) -> int:
               "(Ctrl-C stops it)", file=sys.stderr)
     frames = reconstruct_frames(Reconstructor(net), stream.events, stream.width, stream.height, times,
                                 args.events_per_window or None, net.cfg.num_bins, progress=True)
-    args.out.mkdir(parents=True, exist_ok=True)
-    for k, f in enumerate(frames):
-        write_png(args.out / f"{k:05d}.png", np.round(f * 255).astype(np.uint8))
-    write_text_atomic(args.out / "timestamps.txt", "".join(f"{t}\n" for t in times))
+    made = [d for d in [args.out, *args.out.parents] if not d.exists()]
+    written = []
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+        for k, f in enumerate(frames):
+            written.append(write_png(args.out / f"{k:05d}.png", np.round(f * 255).astype(np.uint8)))
+        write_text_atomic(args.out / "timestamps.txt", "".join(f"{t}\n" for t in times))
+    except BaseException:      # a full disk, a kill: no partial video is left that looks complete
+        for p in written:
+            p.unlink(missing_ok=True)
+        for d in made:
+            with contextlib.suppress(OSError):
+                d.rmdir()
+        raise
     print(f"e2vid: {len(frames)} frames ({stream.width}x{stream.height}) from {len(stream)} events -> {args.out}")
     return 0

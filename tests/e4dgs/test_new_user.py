@@ -500,3 +500,18 @@ def test_a_sliding_window_video_shows_the_last_events():
     assert window_starts(0, 20_000, 5000, 5000) == [0, 5000, 10_000, 15_000]
     assert window_starts(0, 3000, 5000, 5000) == [0]                   # a window longer than the stream
     assert window_starts(100, 10_100, 4000, 2000) == [100, 2100, 4100, 6100]
+
+
+def test_a_real_full_disk_names_the_file_and_leaves_no_partial_output(motion_scene, tmp_path, capsys):
+    """e4dgs e2vid onto a 12 KiB tmpfs: one line naming the file being written, and no partial PNGs."""
+    small = tmp_path / "small"
+    small.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=12k", "tmpfs", str(small)], capture_output=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.decode(errors='replace').strip()}")
+    try:
+        rc, err = cli(["e2vid", "--events", Path(motion_scene) / "events" / "cam0.h5", "--out", small / "video"], capsys)
+        assert rc == 1 and "No space left on device" in err and str(small / "video") in err, err
+        assert list(small.iterdir()) == []
+    finally:
+        subprocess.run(["umount", str(small)], check=True)
