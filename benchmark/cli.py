@@ -49,14 +49,23 @@ def add_testviews_parser(sub) -> None:
                                    "of a dataset root: per view the camera, time, intrinsics, pose, image size, the "
                                    "file name its render must have and the ground truth it is scored against.")
     p.add_argument("data", type=Path, help="a dataset root (data/quick) or one scene folder (data/quick/hinge)")
-    p.add_argument("--out", type=Path, default=None, help="write <out>/<scene>/testviews.json (default: into each scene)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="write <out>/<scene>/testviews.json (default runs/<dataset folder>/testviews; never into "
+                        "the dataset, which `e4dgs check` verifies against its manifest)")
     p.set_defaults(func=run_testviews)
 
 
 def run_testviews(args: argparse.Namespace) -> int:
     from benchmark.testviews import write_test_views
 
-    paths = write_test_views(args.data, args.out)
+    from scene_format.verify import scene_dirs
+
+    root = args.data.resolve() if not (args.data / "manifest.json").is_file() else args.data.resolve().parent
+    out = args.out or Path("runs") / root.name / "testviews"
+    inside = output_inside_input(out, {"the dataset": root}) if scene_dirs(args.data) else None
+    if inside:
+        raise SystemExit(f"error: --out {inside}")
+    paths = write_test_views(args.data, out)
     print(f"testviews: wrote {len(paths)} file(s): " + ", ".join(str(p) for p in paths))
     return 0
 

@@ -1,7 +1,7 @@
 """The held-out views a method must render to be scored, as a file any code can read.
 
     views = test_views(SceneDataset("data/quick/hinge"))   # {"format", "views": [...], ...}
-    write_test_views(Path("data/quick"))                   # <scene>/testviews.json for every scene
+    write_test_views(Path("data/quick"), Path("runs/quick/testviews"))   # <out>/<scene>/testviews.json, every scene
 
 Each view gives the camera index, the time (microseconds, seconds and normalised to [0, 1]), the
 intrinsics, the pose (world-to-camera and camera-to-world in OpenCV axes; camera-to-world in

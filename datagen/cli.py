@@ -144,7 +144,7 @@ def run_check(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from scene_format.verify import other_dirs, scene_dirs, verify_scene
+    from scene_format.verify import other_dirs, scene_dirs, unlisted_files, verify_scene
 
     scenes = scene_dirs(args.path)
     unfinished, others = other_dirs(args.path)
@@ -165,6 +165,10 @@ def run_check(args: argparse.Namespace) -> int:
                 print(f"  {line}")
         else:
             print(f"{d}: OK ({n} files match the manifest)")
+        extra = unlisted_files(d)
+        if extra:   # not an error (a user may keep notes beside the data), but never passed over in silence
+            print(f"{d}: note: {len(extra)} file(s) the manifest does not list, not verified: "
+                  + ", ".join(extra[:5]) + (", ..." if len(extra) > 5 else ""))
     for d in unfinished:
         print(f"{d}: not a finished scene: no manifest.json (its generation did not finish; run the same "
               "`e4dgs dataset` again to resume it)")

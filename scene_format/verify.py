@@ -70,6 +70,16 @@ def verify_scene(scene_dir: Path, progress: Callable[[str], None] | None = None)
     return problems + count_problems(scene_dir, manifest)
 
 
+def unlisted_files(scene_dir: Path) -> list[str]:
+    """Files in a scene folder its manifest does not list (added after generation; not verified)."""
+    try:
+        listed = set(json.loads((scene_dir / "manifest.json").read_text())["files"]) | {"manifest.json"}
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return sorted(rel for rel in (p.relative_to(scene_dir).as_posix() for p in scene_dir.rglob("*") if p.is_file())
+                  if rel not in listed and not rel.split("/")[-1].startswith("."))
+
+
 def count_problems(scene_dir: Path, manifest: dict) -> list[str]:
     """The manifest's own figures against the files: cameras, rendered timestamps, kept frames and
     events per camera (an edited manifest is otherwise believed by everything that reads it)."""

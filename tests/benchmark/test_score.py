@@ -83,8 +83,8 @@ import json, sys
 from pathlib import Path
 import cv2, numpy as np
 
-scene, out = Path(sys.argv[1]), Path(sys.argv[2])
-tv = json.loads((scene / "testviews.json").read_text())
+scene, out, tv_file = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
+tv = json.loads(tv_file.read_text())
 train = json.loads((scene / "transforms_train.json").read_text())["frames"]
 for v in tv["views"]:                      # nearest training frame of the same camera, copied as the render
     best = min((f for f in train if f["camera"] == v["camera"]), key=lambda f: abs(f["time"] - v["time"]))
@@ -99,8 +99,11 @@ assert not mine & {m.split(".")[0] for m in sys.modules}, "imported the project"
 
 
 def test_an_outside_method_reading_only_exported_files_scores_what_a_hand_computation_says(motion_scene, tmp_path):
-    assert e4dgs(["testviews", str(motion_scene)]) == 0
-    tv = json.loads((motion_scene / "testviews.json").read_text())
+    before = sorted(p.relative_to(motion_scene) for p in motion_scene.rglob("*"))
+    assert e4dgs(["testviews", str(motion_scene), "--out", str(tmp_path / "tv")]) == 0
+    assert sorted(p.relative_to(motion_scene) for p in motion_scene.rglob("*")) == before    # the dataset untouched
+    tv_file = tmp_path / "tv" / motion_scene.name / "testviews.json"
+    tv = json.loads(tv_file.read_text())
     ds = SceneDataset(motion_scene)
     assert len(tv["views"]) == len(ds.frames("test")) and tv["width"] == ds.intrinsics.width
     v = tv["views"][-1]
@@ -108,7 +111,7 @@ def test_an_outside_method_reading_only_exported_files_scores_what_a_hand_comput
     assert v["time_s"] == pytest.approx(v["timestamp_us"] * 1e-6) and v["ground_truth"]["rgb"] == f"rgb/cam{v['camera']}/{v['index']:05d}.png"
     script = tmp_path / "outside.py"
     script.write_text(OUTSIDE)
-    r = subprocess.run([sys.executable, "-I", str(script), str(motion_scene), str(tmp_path / "renders")],
+    r = subprocess.run([sys.executable, "-I", str(script), str(motion_scene), str(tmp_path / "renders"), str(tv_file)],
                        capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     (row,) = score_renders(motion_scene.parent, tmp_path / "renders", "nearest_frame", "rgb", lpips_net=None,

@@ -515,3 +515,15 @@ def test_a_real_full_disk_names_the_file_and_leaves_no_partial_output(motion_sce
         assert list(small.iterdir()) == []
     finally:
         subprocess.run(["umount", str(small)], check=True)
+
+
+def test_check_names_files_the_manifest_does_not_list(motion_scene, tmp_path, capsys):
+    import shutil
+
+    scene = tmp_path / "scene"
+    shutil.copytree(motion_scene, scene)
+    (scene / "testviews.json").write_text("{}")
+    (scene / "rgb" / "extra.png").write_bytes(b"x")
+    assert main(["check", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert f"{scene}: OK" in out and "note: 2 file(s) the manifest does not list, not verified: rgb/extra.png, testviews.json" in out
