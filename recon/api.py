@@ -14,18 +14,43 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from scene_format.reader import SceneDataset
-from common.config import build_config, parse_set, set_dotted  # noqa: F401  (parse_set, set_dotted re-exported)
+from common.config import ConfigError, build_config, parse_set, set_dotted  # noqa: F401  (parse_set, set_dotted re-exported)
 from common.fileio import output_inside_input
 from recon.methods import get_method
 from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)
 from recon.trainer import Trainer
 
 
+def config_path(config: str | Path) -> Path:
+    """A method config file: the path as given when it exists; else, from any working folder, the same
+    relative path in the toolkit's checkout (`configs/recon/d3dgs_quick.yaml`), or the name of a
+    shipped config (`d3dgs_quick`: configs/recon/, then configs/recon/bench/; `bench/e4dgs_quick`). ConfigError naming
+    the path and the shipped names otherwise."""
+    from common.provenance import REPO
+
+    path = Path(config)
+    if path.exists():
+        return path
+    shipped = REPO / "configs" / "recon"
+    candidates = [] if path.is_absolute() else [REPO / path]
+    if not path.is_absolute():
+        named = path if path.suffix in (".yaml", ".yml") else path.with_name(f"{path.name}.yaml")
+        candidates += [shipped / named] + ([shipped / "bench" / named] if len(path.parts) == 1 else [])
+    for c in candidates:
+        if c.is_file():
+            return c
+    known = sorted({p.stem for p in shipped.glob("*.yaml")} | {f"bench/{p.stem}" for p in shipped.glob("bench/*.yaml")})
+    raise ConfigError(f"{config}: cannot read config file (no such file, nor a shipped config of that name; "
+                      f"shipped: {', '.join(known)})")
+
+
 def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any] | None = None,
                    overrides_source: str = "--set"):
     """A method's typed config from None (defaults), a YAML path, a mapping or an instance, with
     dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key and its source
-    (the file, or `overrides_source` for an override)."""
+    (the file, or `overrides_source` for an override). A path is found as `config_path` says."""
+    if isinstance(config, (str, Path)):
+        config = config_path(config)
     return build_config(get_method(method).config_cls, config, overrides, overrides_source)
 
 

@@ -527,3 +527,20 @@ def test_check_names_files_the_manifest_does_not_list(motion_scene, tmp_path, ca
     assert main(["check", str(scene)]) == 0
     out = capsys.readouterr().out
     assert f"{scene}: OK" in out and "note: 2 file(s) the manifest does not list, not verified: rgb/extra.png, testviews.json" in out
+
+
+def test_a_shipped_config_is_found_from_any_folder_and_by_name(tmp_path, monkeypatch):
+    import recon
+    from common.config import ConfigError
+
+    monkeypatch.chdir(tmp_path)                     # outside the checkout
+    by_path = recon.resolve_config("d3dgs", "configs/recon/d3dgs_quick.yaml")
+    assert by_path == recon.resolve_config("d3dgs", "d3dgs_quick") and by_path.train.iterations == 1500
+    assert recon.resolve_config("e4dgs", "e4dgs_quick.yaml").train.iterations == \
+        recon.resolve_config("e4dgs", Path(__file__).resolve().parents[2] / "configs/recon/e4dgs_quick.yaml").train.iterations
+    assert recon.resolve_config("d3dgs", "d3dgs_quick", overrides={"train.iterations": 7}).train.iterations == 7
+    assert recon.resolve_config("e4dgs", "bench/e4dgs_quick").train.iterations == 450
+    (tmp_path / "d3dgs_quick.yaml").write_text("train: {iterations: 3}\n")     # a file of the user's wins
+    assert recon.resolve_config("d3dgs", "d3dgs_quick.yaml").train.iterations == 3
+    with pytest.raises(ConfigError, match=r"nope: cannot read config file .*shipped: .*bench/e4dgs_quick"):
+        recon.resolve_config("d3dgs", "nope")
