@@ -106,6 +106,11 @@ class DynamicGaussians:
         """`render` as a float32 array [H, W, C] on the CPU, whatever device the model is on."""
         return self.render(camera, t, backend).cpu().numpy()
 
+    def non_finite(self) -> list[str]:
+        """Names of the parameters holding inf or NaN (gaussians.<name>, deform.<name>); [] when all are finite."""
+        return ([f"gaussians.{n}" for n, p in self.gaussians.named_parameters() if not torch.isfinite(p).all()]
+                + [f"deform.{n}" for n, p in self.deform.named_parameters() if not torch.isfinite(p).all()])
+
     # -- files ----------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
         return {"format": FORMAT, "meta": asdict(self.meta),

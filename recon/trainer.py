@@ -15,7 +15,6 @@ A method supplies the loss (`Method.step`) and its data; the trainer does the re
 """
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
 from dataclasses import replace
@@ -32,7 +31,7 @@ from tqdm import tqdm
 from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
-from common.fileio import atomic_output, output_lock, write_text_atomic
+from common.fileio import atomic_output, output_lock
 from recon import initial_points as initial
 from recon.config import TrainConfig
 from recon.deform import make_field
@@ -45,6 +44,7 @@ from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
 from recon.method import Method
 from recon.precision import PrecisionChoice, resolve_precision
+from recon.run_folder import ForeignRunError, RunFolder
 from recon.dataset_views import gray_from_srgb
 from simulator.pixel import linear_to_srgb, rec709_luma
 
@@ -133,6 +133,7 @@ class Trainer:
         self.progress = progress
         self.on_iteration = on_iteration
         self.fingerprint = fingerprint(method.name, self.cfg, self.dataset)
+        self.folder = RunFolder(self.out, method.name, self.fingerprint)
         self.extent = scene_extent(self.dataset)
         self.device, self.backend = run_placement(self.tcfg.device, self.tcfg.backend)
         self.method.to_device(self.device)
@@ -228,20 +229,10 @@ class Trainer:
 
     # -- checkpoints --------------------------------------------------------------------------------
     def _check_out_dir(self) -> None:
-        run = self.out / "run.json"
-        if run.exists():
-            info = json.loads(run.read_text())
-            if info.get("fingerprint") != self.fingerprint:
-                raise TrainingError(
-                    f"{self.out}: holds a different run (method {info.get('method')!r}, fingerprint "
-                    f"{info.get('fingerprint')}; this run is {self.method.name!r}, {self.fingerprint}: the "
-                    "config or the dataset differ). Use another output folder or delete this one.")
-        else:
-            self.out.mkdir(parents=True, exist_ok=True)
-            write_text_atomic(run, json.dumps({"method": self.method.name, "fingerprint": self.fingerprint,
-                                               "scene_dir": str(self.dataset.dir.resolve()),
-                                               "config": to_dict(self.cfg)}, indent=1))
-            write_text_atomic(self.out / "config.yaml", dump_config(self.cfg))
+        try:
+            self.folder.claim(self.dataset.dir, to_dict(self.cfg), dump_config(self.cfg))
+        except ForeignRunError as exc:
+            raise TrainingError(str(exc)) from None
 
     def _save_checkpoint(self) -> None:
         state = {"format": CHECKPOINT_FORMAT, "fingerprint": self.fingerprint, "iteration": self.iteration,
@@ -273,17 +264,8 @@ class Trainer:
         self.log = json.loads(state["log"])
         return True
 
-    def _record_precision(self) -> None:
-        """This start's precision in run.json (one entry per start: a resumed `auto` run measures again on
-        the machine it resumes on; the parameters are float32, so either dtype continues the run)."""
-        self.model.meta.precision = self.precision.dtype
-        run = self.out / "run.json"
-        info = json.loads(run.read_text())
-        info["precision"] = info.get("precision", []) + [{"from_iteration": self.iteration, **self.precision.to_dict()}]
-        write_text_atomic(run, json.dumps(info, indent=1))
-
     def _write_log(self) -> None:
-        write_text_atomic(self.out / "log.jsonl", "".join(json.dumps(r) + "\n" for r in self.log))
+        self.folder.write_log(self.log)
 
     # -- evaluation -------------------------------------------------------------------------------
     def evaluate(self) -> float:
@@ -315,24 +297,8 @@ class Trainer:
                 return self._run()
             except BaseException:
                 if fresh:
-                    self._remove_unresumable()
+                    self.folder.remove_unresumable()
                 raise
-
-    def _remove_unresumable(self) -> None:
-        """After a failure of a run that started here and saved no checkpoint (nothing to resume), remove
-        what it wrote, so that no folder with a run.json but no model looks like a run."""
-        if (self.out / "checkpoint.pt").exists() or (self.out / "model.pt").exists():
-            return
-        for name in ("run.json", "config.yaml", "log.jsonl"):
-            (self.out / name).unlink(missing_ok=True)
-        snaps = self.out / "snapshots"
-        if snaps.is_dir():
-            for f in snaps.glob("*.pt"):
-                f.unlink()
-            with contextlib.suppress(OSError):
-                snaps.rmdir()
-        with contextlib.suppress(OSError):     # only if nothing else is in it (a user's own files stay)
-            self.out.rmdir()
 
     # -- the steps of one run --------------------------------------------------------------------
     def _start(self) -> None:
@@ -343,7 +309,8 @@ class Trainer:
             tqdm.write(f"{self.method.name}: resuming {self.out} at iteration {self.iteration} of "
                        f"{self.tcfg.iterations} ({self.wall_s:.0f} s trained so far)")
         tqdm.write(f"{self.method.name} {self.dataset.scene.name}: deformation in {self.precision.describe()}")
-        self._record_precision()
+        self.model.meta.precision = self.precision.dtype
+        self.folder.record_precision(self.iteration, self.precision.to_dict())
         self._start_iteration = self.iteration
         # kernel compilation (numba's first call, gsplat's CUDA build) is not training time
         warm_up(self.backend, self.device, self.method.channels())
@@ -451,8 +418,7 @@ class Trainer:
             if self.on_iteration is not None:
                 self.on_iteration(self, it)
         bar.close()
-        bad = [f"gaussians.{n}" for n, p in self.model.gaussians.named_parameters() if not torch.isfinite(p).all()]
-        bad += [f"deform.{n}" for n, p in self.model.deform.named_parameters() if not torch.isfinite(p).all()]
+        bad = self.model.non_finite()
         if bad:
             raise TrainingError(f"{self.method.name}: training ended with non-finite values in {', '.join(bad)}; no model "
                                 "is saved (a learning rate too large?)")
