@@ -119,6 +119,9 @@ def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, spli
     from common.metrics.image import score_pairs
 
     dataset = scene_dir if isinstance(scene_dir, SceneDataset) else SceneDataset(scene_dir)
+    if model.meta.scene and model.meta.scene != dataset.scene.name:
+        raise ValueError(f"{dataset.dir}: the model was trained on scene {model.meta.scene!r}, these are the views of "
+                         f"{dataset.scene.name!r}; its scores would compare two different scenes")
     method = get_method(model.meta.method)
     cfg = resolve_config(model.meta.method, model.meta.config or None)
     records = dataset.frames(split)

@@ -293,3 +293,14 @@ def test_a_run_that_fails_before_its_first_checkpoint_leaves_nothing(motion_scen
     with pytest.raises(OSError):
         recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "later", progress=False, on_iteration=fail_at_12)
     assert (tmp_path / "later" / "checkpoint.pt").exists() and (tmp_path / "later" / "run.json").exists()
+
+
+def test_a_model_is_not_scored_on_another_scene_s_views(trained, motion_scene):
+    import copy
+
+    model = recon.load(trained["out"] / "dynamic")
+    other = copy.copy(model)
+    other.meta = copy.copy(model.meta)
+    other.meta.scene = "lego"
+    with pytest.raises(ValueError, match="trained on scene 'lego', these are the views of 'cubes'"):
+        recon.evaluate(other, motion_scene)
