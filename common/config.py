@@ -40,8 +40,17 @@ def check_positive(obj, *names: str) -> None:
             raise ConfigError(f"{name}: expected a positive value, got {getattr(obj, name)!r}")
 
 
+MAX_SHOWN = 80     # characters of a wrong value an error message shows (YAML anchors can expand without bound)
+
+
+def shown(value: Any) -> str:
+    """repr(value), cut to MAX_SHOWN characters with its full length said."""
+    text = repr(value)
+    return text if len(text) <= MAX_SHOWN else f"{text[:MAX_SHOWN]}... ({len(text):,} characters)"
+
+
 def _describe(value: Any) -> str:
-    return f"{value!r} ({type(value).__name__})"
+    return f"{shown(value)} ({type(value).__name__})"
 
 
 def _convert(tp: Any, value: Any, path: str) -> Any:
@@ -258,7 +267,7 @@ def parse_set(items: list[str]) -> dict[str, Any]:
         try:
             out[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError as exc:
-            raise ConfigError(f"--set {key.strip()}: the value {value!r} is not valid YAML "
+            raise ConfigError(f"--set {key.strip()}: the value {shown(value)} is not valid YAML "
                               f"({' '.join(str(exc).split())})") from None
     return out
 

@@ -95,3 +95,20 @@ def test_yaml_merge_keys_work_and_duplicates_are_still_refused(tmp_path):
     path.write_text("other:\n  y: 2\n  y: 3\n")
     with pytest.raises(ConfigError, match="'y' appears twice"):
         read_yaml_mapping(path)
+
+
+def test_an_error_never_prints_an_unbounded_value(tmp_path):
+    """A huge value (a YAML anchor can expand without bound) in a field that wants a number: the message
+    shows 80 characters of it and says how long it is."""
+    from common.config import load_config
+
+    @dataclass(frozen=True)
+    class C:
+        n: int = 1
+
+    row = "[" + ", ".join(["xxxxxxxx"] * 200) + "]"
+    (tmp_path / "d.yaml").write_text("n: [&r " + row + ", " + ", ".join(["*r"] * 200) + "]\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(C, tmp_path / "d.yaml")
+    msg = str(exc.value)
+    assert "n: expected an integer, got [['xxxxxxxx'" in msg and "characters) (list)" in msg and len(msg) < 300
