@@ -105,6 +105,8 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{path}: expected an integer, got {_describe(value)}")
+        if not -2 ** 63 <= value < 2 ** 63:      # seeds, counts: what NumPy, HDF5 and torch store
+            raise ConfigError(f"{path}: expected an integer within 64 bits, got one of {len(str(abs(value)))} digits")
         return value
     if tp is float:
         if isinstance(value, str) and _YAML11_EXPONENT.fullmatch(value.strip()):

@@ -544,3 +544,17 @@ def test_a_shipped_config_is_found_from_any_folder_and_by_name(tmp_path, monkeyp
     assert recon.resolve_config("d3dgs", "d3dgs_quick.yaml").train.iterations == 3
     with pytest.raises(ConfigError, match=r"nope: cannot read config file .*shipped: .*bench/e4dgs_quick"):
         recon.resolve_config("d3dgs", "nope")
+
+
+def test_config_integers_beyond_64_bits_are_refused_by_key():
+    """The sibling of --seed 99999999999999999999999 in every config: a seed or count no generator or
+    file can hold is refused naming the key."""
+    import recon
+    from common.config import ConfigError, from_dict
+    from scene_format.config import SceneConfig
+
+    with pytest.raises(ConfigError, match="train.seed: expected an integer within 64 bits, got one of 23 digits"):
+        recon.resolve_config("d3dgs", overrides={"train.seed": 99999999999999999999999})
+    with pytest.raises(ConfigError, match="seed: expected an integer within 64 bits"):
+        from_dict(SceneConfig, {"name": "x", "kind": "object", "seed": 2 ** 64})
+    assert recon.resolve_config("d3dgs", overrides={"train.seed": 2 ** 63 - 1}).train.seed == 2 ** 63 - 1
