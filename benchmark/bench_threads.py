@@ -28,9 +28,9 @@ def child(part: str, size: int, reps: int) -> None:
     threads = int(os.environ["OMP_NUM_THREADS"])
     torch.set_num_threads(threads)
     if part == "mlp":
-        from recon.precision import _timing_field
+        from recon.precision import timing_field
 
-        f = _timing_field(torch.device("cpu"))
+        f = timing_field(torch.device("cpu"))
         x = torch.rand(size, 3, generator=torch.Generator().manual_seed(1))
 
         def run():

@@ -8,6 +8,7 @@ The Makefile points E4DGS_CACHE_DIR at .venv/e4dgs-cache, beside numba's compile
 """
 from __future__ import annotations
 
+import functools
 import os
 import platform
 from pathlib import Path
@@ -16,6 +17,7 @@ from pathlib import Path
 SPEED_FLAGS = ("avx2", "fma", "avx512f", "avx512_bf16", "avx512_vnni", "amx_bf16", "amx_tile")
 
 
+@functools.lru_cache(maxsize=None)     # the processor does not change while a process runs
 def _cpuinfo(path: str = "/proc/cpuinfo") -> dict[str, str]:
     """The first processor's fields of /proc/cpuinfo ({} where there is none: not Linux)."""
     fields: dict[str, str] = {}

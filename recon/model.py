@@ -147,11 +147,10 @@ class DynamicGaussians:
 def upgrade_meta(meta: dict) -> dict:
     """A stored ModelMeta mapping of an older version in today's terms: `deform_bf16: true / false`
     (also inside the stored config's train section) became `precision: bfloat16 / float32`."""
-    if "deform_bf16" in meta:
-        meta["precision"] = "bfloat16" if meta.pop("deform_bf16") else "float32"
     train = meta.get("config", {}).get("train") if isinstance(meta.get("config"), dict) else None
-    if isinstance(train, dict) and "deform_bf16" in train:
-        train["precision"] = "bfloat16" if train.pop("deform_bf16") else "float32"
+    for m in (meta, train if isinstance(train, dict) else {}):
+        if "deform_bf16" in m:
+            m["precision"] = "bfloat16" if m.pop("deform_bf16") else "float32"
     return meta
 
 

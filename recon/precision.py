@@ -87,7 +87,7 @@ def autocast(dtype: str, device: torch.device | str):
     return contextlib.nullcontext()
 
 
-def _timing_field(device: torch.device) -> DeformationField:
+def timing_field(device: torch.device) -> DeformationField:
     """A field whose heads are not zero (an untrained field's backward would skip nothing, but keep it real)."""
     gen = torch.Generator().manual_seed(0)
     f = DeformationField()
@@ -104,7 +104,7 @@ def time_deformation(device: torch.device, n_points: int = MEASURE_POINTS, repea
     Both dtypes run one warm-up pass, then the timed passes alternate between them, so a stall of the
     machine hits both. A dtype whose warm-up took stop_ratio x the other's is reported by that one pass
     (it cannot win: on a core without bf16 this saves ~10 s of a 45x slower product)."""
-    f = _timing_field(device)
+    f = timing_field(device)
     gen = torch.Generator().manual_seed(1)
     x = torch.rand(n_points, 3, generator=gen).to(device)
 
@@ -159,14 +159,18 @@ def _cached_timings(entry) -> dict[str, float] | None:
 
 
 def resolve_precision(requested: str, device: torch.device | str, cache: Path | None = None,
-                      timer: Callable[[torch.device], Mapping[str, float]] = time_deformation) -> PrecisionChoice:
+                      timer: Callable[[torch.device], Mapping[str, float]] = time_deformation,
+                      field_kind: str = "mlp") -> PrecisionChoice:
     """The dtype a run computes its deformation in: `requested` as it is, or for `auto` the faster one
     on this machine (cached in `cache`, default cache_dir() / precision.json; a cache that cannot be
-    read is measured again, one that cannot be written is warned about and skipped)."""
+    read is measured again, one that cannot be written is warned about and skipped). A trajectory
+    field (a few products per Gaussian) has nothing to gain: `auto` is float32 for it."""
     check_precision(requested)
     device = torch.device(device)
     if requested != "auto":
         return PrecisionChoice(requested, "config")
+    if field_kind == "trajectory":
+        return PrecisionChoice("float32", "trajectory")
     if device.type == "cuda":
         return PrecisionChoice("float32", "cuda", machine_key(device))
     key = machine_key(device)

@@ -149,9 +149,7 @@ class Trainer:
     @functools.cached_property
     def precision(self) -> PrecisionChoice:
         """The deformation's dtype on this machine (train.precision; `auto` measured once per machine)."""
-        if self.tcfg.deform_field.kind == "trajectory" and self.tcfg.precision == "auto":
-            return PrecisionChoice("float32", "trajectory")       # a few products per Gaussian: nothing to gain
-        return resolve_precision(self.tcfg.precision, self.device)
+        return resolve_precision(self.tcfg.precision, self.device, field_kind=self.tcfg.deform_field.kind)
 
     # -- set-up -----------------------------------------------------------------------------------
     def _new_model(self) -> DynamicGaussians:
@@ -291,7 +289,7 @@ class Trainer:
     def run(self) -> DynamicGaussians:
         """Train to the budget (resuming a checkpoint), holding a lock on the output folder so two
         runs into one folder cannot interleave their checkpoints."""
-        fresh = not (self.out / "run.json").exists()
+        fresh = not self.folder.run_json.exists()
         with output_lock(self.out):
             try:
                 return self._run()

@@ -164,7 +164,7 @@ def test_a_run_records_its_choice_and_a_resume_takes_the_machine_s(motion_scene,
     timings = {"float32": 50.0, "bfloat16": 20.0}
     measured = []
 
-    def resolve(requested, device):
+    def resolve(requested, device, **kwargs):
         measured.append(requested)
         return prec.resolve_precision(requested, device, cache=tmp_path / f"cache{len(measured)}.json",
                                       timer=fake_timer(timings))
