@@ -132,6 +132,33 @@ class DeformFieldConfig:
 
 
 @dataclass(frozen=True)
+class CoarseToFineConfig:
+    """Render and supervise at reduced resolution first (recon.coarse): factors[k] (an integer >= 2,
+    decreasing) until the fraction until[k] of the run (increasing, in (0, 1]), then full resolution.
+    Empty (the default): full resolution throughout. Example: factors [4, 2], until [0.2, 0.5]."""
+    factors: tuple[int, ...] = ()
+    until: tuple[float, ...] = ()
+
+    def __post_init__(self):
+        if len(self.factors) != len(self.until):
+            raise ConfigError(f"factors, until: expected one end per factor, got {len(self.factors)} factors and "
+                              f"{len(self.until)} ends")
+        if any(not isinstance(f, int) or isinstance(f, bool) or f < 2 for f in self.factors) or \
+                any(a <= b for a, b in zip(self.factors, self.factors[1:])):
+            raise ConfigError(f"factors: expected integers >= 2, decreasing, got {list(self.factors)!r}")
+        if any(not 0 < u <= 1 for u in self.until) or any(a >= b for a, b in zip(self.until, self.until[1:])):
+            raise ConfigError(f"until: expected fractions of the run in (0, 1], increasing, got {list(self.until)!r}")
+
+    def factor_at(self, iteration: int, iterations: int) -> int:
+        """The render factor at `iteration` (1-based) of a run of `iterations`: factors[k] while
+        iteration <= until[k] x iterations (the first stage not yet ended), then 1."""
+        for f, end in zip(self.factors, self.until):
+            if iteration <= end * iterations:
+                return f
+        return 1
+
+
+@dataclass(frozen=True)
 class Schedule:
     """Iteration numbers after scaling to the run's budget."""
     warm_up: int
@@ -154,6 +181,7 @@ class TrainConfig:
     schedule_reference: int = REFERENCE_ITERATIONS
     deform: bool = True               # false: a static 3DGS (no deformation field is ever applied)
     deform_field: DeformFieldConfig = field(default_factory=DeformFieldConfig)
+    coarse_to_fine: CoarseToFineConfig = field(default_factory=CoarseToFineConfig)
     warm_up: int = 3000               # deformation off before this (reference iterations)
     position_lr_steps: int = 30_000
     deform_lr_steps: int = 40_000

@@ -24,10 +24,13 @@ class DensifyStats:
     def __len__(self) -> int:
         return self.grad_accum.shape[0]
 
-    def add(self, out: RenderOutput, width: int, height: int) -> None:
-        """Accumulate one render's statistics (call after backward; means2d must have kept its grad)."""
+    def add(self, out: RenderOutput, width: int, height: int, pixel_scale: int = 1) -> None:
+        """Accumulate one render's statistics (call after backward; means2d must have kept its grad).
+        A render `pixel_scale` times coarser than the training images (coarse-to-fine) counts its radii
+        in full-resolution pixels; the NDC gradient needs no scaling (it is resolution-free)."""
         visible = out.radii > 0
-        self.max_radii[visible] = torch.maximum(self.max_radii[visible], out.radii[visible].to(self.max_radii.dtype))
+        radii = out.radii[visible].to(self.max_radii.dtype) * pixel_scale
+        self.max_radii[visible] = torch.maximum(self.max_radii[visible], radii)
         g = out.means2d.grad
         if g is None:
             return

@@ -18,11 +18,13 @@ from recon.scoring import Scorer
 class StepContext(Protocol):
     """What a method's training hooks may use of the trainer that calls them (recon.trainer.Trainer is
     one): the model being trained, the raster backend, the training's random generator, the next
-    view index of a shuffled epoch, and the training config."""
+    view index of a shuffled epoch, the training config, and this iteration's coarse-to-fine factor
+    (render through recon.coarse.coarse_camera and reduce the targets with recon.coarse; 1: full size)."""
     model: DynamicGaussians
     backend: str
     rng: np.random.Generator
     tcfg: Any
+    render_factor: int
 
     def next_index(self, n: int) -> int: ...
 

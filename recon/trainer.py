@@ -145,6 +145,7 @@ class Trainer:
         self.iteration = 0
         self._order: list[int] = []
         self._start_iteration: int | None = None
+        self.render_factor = 1     # this iteration's coarse-to-fine factor (train.coarse_to_fine)
 
     @functools.cached_property
     def precision(self) -> PrecisionChoice:
@@ -321,6 +322,7 @@ class Trainer:
         g.active_sh_degree = min(cfg.sh_degree, it // sched.sh_interval)
         self.model.meta.active_sh_degree = g.active_sh_degree
         self.model.meta.deform_enabled = cfg.deform and it > sched.warm_up
+        self.render_factor = cfg.coarse_to_fine.factor_at(it, cfg.iterations)
         try:
             loss, renders = self.method.step(self, it)
         except (TrainingError, KeyboardInterrupt):
@@ -347,8 +349,8 @@ class Trainer:
         extra = self.method.prune_mask(self, it)
         densify_now = d.enabled and sched.densify_start < it < sched.densify_stop and it % sched.densify_interval == 0
         if d.enabled and it < sched.densify_stop:
-            for out, cam in renders:
-                self.stats.add(out, cam.width, cam.height)
+            for out, cam in renders:   # radii in full-resolution pixels, whatever the render's factor
+                self.stats.add(out, cam.width, cam.height, self.render_factor)
         if densify_now:
             if g.anchors is not None:  # deformation inputs follow the means between edits
                 g.anchors = g.means.detach().clone()
@@ -384,6 +386,8 @@ class Trainer:
         first = self._start_iteration is not None and it == self._start_iteration + 1
         if first:
             row["precision"] = self.precision.dtype
+        if self.render_factor != 1:
+            row["render_factor"] = self.render_factor
         if do_eval or info or first or it % 10 == 0 or it == 1:
             self.log.append(row)
         return row

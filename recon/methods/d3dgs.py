@@ -20,6 +20,7 @@ from recon.methods import register
 from recon.raster import Camera
 from recon.method import Method
 from recon.dataset_views import load_frame, record_camera
+from recon.coarse import coarse_camera, coarse_srgb
 
 
 @dataclass
@@ -73,8 +74,10 @@ class D3DGS(Method):
 
     def step(self, trainer, iteration: int):
         view = self.views[trainer.next_index(len(self.views))]
-        out = trainer.model.render_output(view.camera, view.time, trainer.backend)
+        f = trainer.render_factor
+        camera = coarse_camera(view.camera, f)
+        out = trainer.model.render_output(camera, view.time, trainer.backend)
         if out.means2d.requires_grad:
             out.means2d.retain_grad()
-        loss = photometric_loss(out.image, view.image, self.cfg.lambda_dssim)
-        return loss, [(out, view.camera)]
+        loss = photometric_loss(out.image, coarse_srgb(view.image, f), self.cfg.lambda_dssim)
+        return loss, [(out, camera)]

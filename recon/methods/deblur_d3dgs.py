@@ -26,6 +26,7 @@ from recon.losses import photometric_loss
 from recon.methods import register
 from recon.method import Method
 from recon.dataset_views import blur_views
+from recon.coarse import coarse_camera, coarse_srgb
 
 
 def lowres_l1(render: torch.Tensor, target: torch.Tensor, factor: int) -> torch.Tensor:
@@ -83,11 +84,15 @@ class DeblurD3DGS(Method):
     def step(self, trainer, iteration: int):
         cfg = self.cfg
         view = self.views[trainer.next_index(len(self.views))]
-        outs = [trainer.model.render_output(c, t, trainer.backend) for c, t in zip(view.cameras, view.times)]
-        loss = photometric_loss(ev.exposure_mean([o.image for o in outs]), view.image, cfg.lambda_dssim)
+        f = trainer.render_factor
+        cameras = [coarse_camera(c, f) for c in view.cameras]
+        target = coarse_srgb(view.image, f)
+        outs = [trainer.model.render_output(c, t, trainer.backend) for c, t in zip(cameras, view.times)]
+        loss = photometric_loss(ev.exposure_mean([o.image for o in outs]), target, cfg.lambda_dssim)
         if cfg.lambda_lowres > 0:   # the middle render sits at the exposure centre (blur_samples is odd)
-            loss = loss + cfg.lambda_lowres * lowres_l1(outs[len(outs) // 2].image, view.image, cfg.lowres_factor)
+            low = max(1, cfg.lowres_factor // f)      # the same block size in full-resolution pixels
+            loss = loss + cfg.lambda_lowres * lowres_l1(outs[len(outs) // 2].image, target, low)
         for out in outs:
             if out.means2d.requires_grad:
                 out.means2d.retain_grad()
-        return loss, list(zip(outs, view.cameras))
+        return loss, list(zip(outs, cameras))

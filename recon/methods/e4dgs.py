@@ -36,6 +36,7 @@ from recon.methods import register
 from recon.model import DynamicGaussians
 from recon.method import Method
 from recon.dataset_views import BlurView, blur_views, dataset_camera
+from recon.coarse import block_mean, coarse_camera, coarse_srgb
 
 PAPER_PIXELS = 346 * 260
 
@@ -138,8 +139,9 @@ class E4DGS(Method):
         t_start_us, t_end_us = windows[0].t_start_us, windows[0].t_end_us
         t_s = min(max(t_start_us / ds.duration_us, 0.0), 1.0)
         t_e = min(max(t_end_us / ds.duration_us, 0.0), 1.0)
-        cams_s = [dataset_camera(ds, w.camera, t_start_us) for w in windows]
-        cams_e = [dataset_camera(ds, w.camera, t_end_us) for w in windows]
+        f = trainer.render_factor
+        cams_s = [coarse_camera(dataset_camera(ds, w.camera, t_start_us), f) for w in windows]
+        cams_e = [coarse_camera(dataset_camera(ds, w.camera, t_end_us), f) for w in windows]
         outs_s = trainer.model.render_outputs(cams_s, t_s, trainer.backend)
         outs_e = trainer.model.render_outputs(cams_e, t_e, trainer.backend)
         intr = ds.intrinsics
@@ -148,6 +150,7 @@ class E4DGS(Method):
             de, hits = ev.event_maps(window.x, window.y, window.p, intr.width, intr.height, self.c_pos, self.c_neg)
             n_gt = torch.from_numpy(ev.gt_counts(de, hits, self.c_ref, e.noise_sigma if e.ess else 0.0,
                                                  trainer.rng)).to(self.device)
+            n_gt = block_mean(n_gt, f)        # counts are linear in log intensity: block means (recon.coarse)
             n_pred = ev.predicted_counts(self.log_intensity(out_s.image), self.log_intensity(out_e.image), self.c_hat)
             loss = loss + e.lambda_recon * ev.multiscale_recon_loss(n_gt, n_pred, e.loss_scales, e.recon_eps)
             if e.lambda_tv > 0:
@@ -157,10 +160,12 @@ class E4DGS(Method):
 
     def rgb_loss(self, trainer):
         view = self.blur_views[trainer.next_index(len(self.blur_views))]
-        outs = [trainer.model.render_output(c, t, trainer.backend) for c, t in zip(view.cameras, view.times)]
+        f = trainer.render_factor
+        cameras = [coarse_camera(c, f) for c in view.cameras]
+        outs = [trainer.model.render_output(c, t, trainer.backend) for c, t in zip(cameras, view.times)]
         pred = ev.exposure_mean([o.image for o in outs])
-        loss = photometric_loss(pred, view.image, self.cfg.lambda_dssim)
-        return loss, list(zip(outs, view.cameras))
+        loss = photometric_loss(pred, coarse_srgb(view.image, f), self.cfg.lambda_dssim)
+        return loss, list(zip(outs, cameras))
 
     def step(self, trainer, iteration: int):
         e = self.cfg.events
