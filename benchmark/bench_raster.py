@@ -11,7 +11,14 @@ Two scenes, a loss touching image, alpha and depth:
 Backends `torch` (reference) and `cpu` (numba), 1 and 2 threads, alternated so that machine stalls
 hit all alike.
 
+`--runs DIR ...` is the headline: the states training really visits. Each training folder's
+snapshots and final model (a quick run's 10 / 25 / 50 / 75 / 100 %) are rendered from the scene's
+camera 0 at t = 0.5 with the deformation applied, forward + backward of the same loss, with the cpu
+backend at 1 thread, at full resolution and at the coarse-to-fine factors 2 and 4
+(recon.coarse.coarse_camera), all alternated.
+
     python -m benchmark.bench_raster [--sizes 20000 100000] [--scenes trained early] [--repeats 7] [--torch-max 20000]
+    python -m benchmark.bench_raster --runs runs/field_curves/hinge/d3dgs_trajectory [--factors 1 2 4]
 """
 from __future__ import annotations
 
@@ -67,13 +74,80 @@ def step(params, cam, bg, backend):
     loss.backward()
 
 
+def training_states(run_dirs: list[str]) -> list[tuple[str, object]]:
+    """(label, model) of every snapshot and the final model of each training folder, in iteration order."""
+    from pathlib import Path
+
+    import recon
+    states = []
+    for run in map(Path, run_dirs):
+        files = sorted((run / "snapshots").glob("iter_*.pt")) + [run / "model.pt"]
+        seen = set()
+        for f in files:
+            if not f.exists():
+                raise SystemExit(f"bench_raster: {f} does not exist (--runs takes finished training folders)")
+            model = recon.load(f)
+            if model.meta.iteration in seen:       # the last snapshot is the final model
+                continue
+            seen.add(model.meta.iteration)
+            states.append((f"{run.name} @ {model.meta.iteration}", model))
+    return states
+
+
+def time_training_states(run_dirs: list[str], factors: list[int], repeats: int) -> int:
+    from common.machine import cpu_summary
+    from recon.coarse import coarse_camera
+    from recon.render import deformed, render_deformed
+
+    numba.set_num_threads(1)
+    torch.set_num_threads(1)
+    rows = []
+    for label, model in training_states(run_dirs):
+        g = model.gaussians
+        for p in g.parameters():
+            p.requires_grad_(True)
+        field = model.deform if model.meta.deform_enabled else None
+        cam = model.camera(0, 0.5)
+
+        def once(f):
+            for p in g.parameters():
+                p.grad = None
+            out = render_deformed(g, deformed(g, field, 0.5, model.meta.precision), coarse_camera(cam, f),
+                                  model.background, "cpu")
+            (out.image.square().mean() + out.alpha.mean() + 0.01 * out.depth.mean()).backward()
+            return out
+        times = {f: [] for f in factors}
+        for f in factors:
+            once(f)
+        for _ in range(repeats):
+            for f in factors:
+                t0 = time.perf_counter()
+                once(f)
+                times[f].append(time.perf_counter() - t0)
+        with torch.no_grad():
+            radii = once(1).radii.float()
+        rows.append((label, len(model), float(radii[radii > 0].median()) if (radii > 0).any() else 0.0,
+                     [statistics.median(times[f]) * 1e3 for f in factors]))
+    print(f"training states: forward + backward per render (deformation included), cpu backend, 1 thread, "
+          f"median of {repeats} (ms); CPU: {cpu_summary()}")
+    print("| state | Gaussians | median radius px | " + " | ".join(f"factor {f}" for f in factors) + " |")
+    print("|---|---:|---:|" + "---:|" * len(factors))
+    for label, n, rad, ms in rows:
+        print(f"| {label} | {n:,} | {rad:.0f} | " + " | ".join(f"{m:,.1f}" for m in ms) + " |")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", nargs="+", metavar="DIR", help="time the saved states of these training folders")
+    ap.add_argument("--factors", type=int, nargs="+", default=[1, 2, 4], help="coarse-to-fine factors (--runs)")
     ap.add_argument("--sizes", type=int, nargs="+", default=[20000, 100000])
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--torch-max", type=int, default=20000, help="largest N timed with the slow torch backend")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     args = ap.parse_args(argv)
+    if args.runs:
+        return time_training_states(args.runs, args.factors, args.repeats)
     rows = []
     for kind, n in [(k, n) for k in args.scenes for n in args.sizes]:
         params, cam, bg = SCENES[kind](n)

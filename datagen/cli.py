@@ -132,11 +132,31 @@ def run_masks(args: argparse.Namespace) -> int:
 
 
 def add_check_parser(sub) -> None:
-    p = sub.add_parser("check", help="verify a dataset against its manifests (sizes, SHA-256, event files)",
+    p = sub.add_parser("check", help="verify a dataset against its manifests (sizes, SHA-256, event files), or one event file",
                        description="Check every file a scene's manifest.json lists: present, same size and SHA-256, "
-                                   "and event files readable and well-formed. Exit status 1 if anything differs.")
-    p.add_argument("path", type=Path, help="a scene folder, or a dataset root holding scene folders")
+                                   "and event files readable and well-formed; or one event file (.h5, e.g. from "
+                                   "`e4dgs import`): every event checked. Exit status 1 if anything differs.")
+    p.add_argument("path", type=Path, help="a scene folder, a dataset root holding scene folders, or an event file")
     p.set_defaults(func=run_check)
+
+
+def check_event_file(path: Path) -> int:
+    """`e4dgs check FILE.h5`: the file's layout and every event (simulator.event_check), one line."""
+    from simulator.event_file import EventFile
+    from simulator.h5io import EventFileError
+
+    if path.suffix != ".h5":
+        raise SystemExit(f"error: {path}: expected a scene folder, a dataset root or an event file (.h5); "
+                         "`e4dgs import` turns other recordings into one")
+    try:
+        with EventFile(path) as ev:
+            span = f", {int(ev.times(0, 1)[0])} .. {int(ev.times(ev.n - 1, ev.n)[0])} us" if ev.n else ""
+            print(f"{path}: OK ({ev.n} events, {ev.width}x{ev.height}{span})")
+    except (EventFileError, ValueError) as exc:
+        message = " ".join(str(exc).split())
+        print(message if message.startswith(str(path)) else f"{path}: {message}")
+        return 1
+    return 0
 
 
 def run_check(args: argparse.Namespace) -> int:
@@ -146,6 +166,8 @@ def run_check(args: argparse.Namespace) -> int:
 
     from scene_format.verify import other_dirs, scene_dirs, unlisted_files, verify_scene
 
+    if args.path.is_file():
+        return check_event_file(args.path)
     scenes = scene_dirs(args.path)
     unfinished, others = other_dirs(args.path)
     if not scenes and not unfinished:

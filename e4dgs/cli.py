@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     from datagen.cli import add_check_parser, add_dataset_parser, add_masks_parser
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
+    from scene_format.convert_cli import add_export_parser, add_import_parser
     from simulator.cli import add_simulate_parser, add_view_parser
     from viewer.cli import add_viewer_parser
 
@@ -29,6 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     add_simulate_parser(sub)
     add_view_parser(sub)
+    add_export_parser(sub)
+    add_import_parser(sub)
     add_dataset_parser(sub)
     add_check_parser(sub)
     add_masks_parser(sub)

@@ -158,3 +158,16 @@ def test_the_event_target_is_the_block_mean_of_the_counts(motion_scene, tmp_path
     trainer.method.step(trainer, 1)
     assert got["n_pred"].shape == (24, 32)
     torch.testing.assert_close(got["n_gt"], block_mean(torch.from_numpy(fine["n"]), 2))
+
+
+def test_bench_raster_times_every_saved_state_of_a_run_at_each_factor(motion_scene, tmp_path, capsys):
+    from benchmark.bench_raster import main, training_states
+    cfg = {**SMALL, "train.snapshots": [0.5, 1.0]}
+    recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "run", progress=False)
+    states = training_states([str(tmp_path / "run")])
+    assert [label for label, _ in states] == ["run @ 6", "run @ 12"]     # the final model is not timed twice
+    assert main(["--runs", str(tmp_path / "run"), "--factors", "1", "2", "--repeats", "1"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| run @")]
+    assert len(rows) == 2 and all(len(r.split("|")) == 7 for r in rows)       # state, N, radius, 2 factors
+    with pytest.raises(SystemExit, match="does not exist"):
+        main(["--runs", str(tmp_path / "nothing")])
