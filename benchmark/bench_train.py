@@ -22,7 +22,8 @@ stalls hit both alike and the speed-up ratio comes from one run. `--precisions` 
 this tree under several `train.precision` values (one worker each; `auto` shows what it resolved to),
 so the deformation's dtypes are compared on one machine in one run; `--fields trajectory` adds a
 worker whose deformation is per-Gaussian trajectories (its time falls under "rest": the MLP columns
-time the MLP only). Medians throughout; the CPU
+time the MLP only); `--coarse 2 4` adds trajectory workers whose renders and targets are those of a
+coarse-to-fine stage at 1/2 and 1/4 resolution (train.coarse_to_fine). Medians throughout; the CPU
 (model and its bf16-relevant flags) is printed above the table.
 """
 from __future__ import annotations
@@ -196,6 +197,8 @@ def worker(threads: int) -> None:
         if "setup" in cmd:
             trainer = build_trainer(cmd["scene"], cmd["setup"], cmd["gaussians"], cmd["phase"],
                                     tempfile.mkdtemp(dir=tmp.name), cmd.get("overrides"))
+            if cmd.get("factor", 1) != 1:      # a coarse-to-fine stage: every render at 1/factor size
+                trainer.render_factor = cmd["factor"]
             one_iteration(trainer, clock)            # compile / warm caches
             import recon
             choice = getattr(trainer, "precision", None)     # an older tree has no train.precision
@@ -208,12 +211,12 @@ def worker(threads: int) -> None:
 
 # -- driver -----------------------------------------------------------------------------------------
 class Tree:
-    def __init__(self, label: str, root: Path, threads: int, overrides: dict | None = None):
+    def __init__(self, label: str, root: Path, threads: int, overrides: dict | None = None, factor: int = 1):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
                    NUMBA_NUM_THREADS=str(max(threads, 1)), E4DGS_BENCH_TREE=str(root))
         if root != REPO:   # an older tree's compiled kernels stay in its temporary folder
             env["NUMBA_CACHE_DIR"] = str(root / ".numba-cache")
-        self.label, self.root, self.overrides = label, root, overrides or {}
+        self.label, self.root, self.overrides, self.factor = label, root, overrides or {}, factor
         self.precision = self.overrides.get("train.precision")
         # this file runs in every tree (-P: its own folder stays off sys.path, the tree's packages are found)
         self.proc = subprocess.Popen([sys.executable, "-P", __file__, "--worker", str(threads)], cwd=root, env=env,
@@ -265,6 +268,8 @@ def main(argv=None) -> int:
                     help="time this tree once per train.precision value (default: the configs' own)")
     ap.add_argument("--fields", nargs="+", default=[], choices=["mlp", "trajectory"],
                     help="also time this tree with train.deform_field.kind set to each of these")
+    ap.add_argument("--coarse", nargs="+", type=int, default=[], metavar="FACTOR",
+                    help="also time trajectory-field iterations of coarse-to-fine stages rendered at 1/FACTOR size")
     ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
@@ -280,6 +285,8 @@ def main(argv=None) -> int:
         trees = [Tree("this tree" + (f", {p}" if p else ""), REPO, args.threads, {"train.precision": p} if p else None)
                  for p in (args.precisions or [None])]
         trees += [Tree(f"this tree, {f} field", REPO, args.threads, {"train.deform_field.kind": f}) for f in args.fields]
+        trees += [Tree(f"this tree, trajectory field, 1/{f} resolution", REPO, args.threads,
+                       {"train.deform_field.kind": "trajectory"}, factor=f) for f in args.coarse]
         if args.against:
             trees.append(Tree(args.against, stack.enter_context(checkout(args.against)), args.threads))
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
@@ -290,7 +297,8 @@ def main(argv=None) -> int:
         for method in args.methods:
             for phase in args.phases:
                 replies = [t.ask({"setup": method, "phase": phase, "scene": scene, "gaussians": args.gaussians,
-                                  **({"overrides": t.overrides} if t.overrides else {})}) for t in trees]
+                                  "factor": t.factor, **({"overrides": t.overrides} if t.overrides else {})})
+                           for t in trees]
                 for t, r in zip(trees, replies):
                     if not r["recon"].startswith(str(t.root)):
                         raise RuntimeError(f"bench_train: the worker of {t.label} imported {r['recon']}")

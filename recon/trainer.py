@@ -146,6 +146,12 @@ class Trainer:
         self._order: list[int] = []
         self._start_iteration: int | None = None
         self.render_factor = 1     # this iteration's coarse-to-fine factor (train.coarse_to_fine)
+        intr = self.dataset.intrinsics
+        too_coarse = [f for f in self.tcfg.coarse_to_fine.factors if f > min(intr.width, intr.height)]
+        if too_coarse:
+            raise TrainingError(f"train.coarse_to_fine.factors: {too_coarse[0]} would render {self.dataset.dir.name}'s "
+                                f"{intr.width}x{intr.height} images at {intr.width // too_coarse[0]}x"
+                                f"{intr.height // too_coarse[0]} pixels; use factors up to {min(intr.width, intr.height)}")
 
     @functools.cached_property
     def precision(self) -> PrecisionChoice:

@@ -66,22 +66,42 @@ def parse_seconds(text: str) -> int:
 
 
 def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
+    """An E2VID text file; ValueError naming the file (and the line) for anything else."""
     path = Path(path)
     with open(path) as fh:
         header = fh.readline().split()
-        if len(header) != 2:
-            raise ValueError(f"{path}: first line must be 'width height', got {' '.join(header)!r}")
+        if len(header) != 2 or not all(v.isdigit() and int(v) > 0 for v in header):
+            raise ValueError(f"{path}: first line must be 'width height' (two positive integers), got "
+                             f"{' '.join(header)[:80]!r}")
         width, height = int(header[0]), int(header[1])
-        data = np.loadtxt(fh, dtype=str, ndmin=2)
+        try:
+            data = np.loadtxt(fh, dtype=str, ndmin=2)
+        except ValueError as exc:
+            raise ValueError(f"{path}: expected lines 't x y p' ({' '.join(str(exc).split())[:120]})") from None
     if data.size == 0:
         return EventStream(make_events([], [], [], []), width, height)
+    if data.shape[1] != 4:
+        raise ValueError(f"{path}: expected 4 columns 't x y p', got {data.shape[1]}")
     try:
         t = np.array([parse_seconds(v) for v in data[:, 0].tolist()], np.int64)
     except ValueError as exc:
         raise ValueError(f"{path}: time column: {exc}") from None
-    p = np.where(data[:, 3].astype(np.int64) > 0, 1, -1).astype(np.int8)
-    stream = EventStream(make_events(t, data[:, 1].astype(np.uint16), data[:, 2].astype(np.uint16), p), width, height)
-    validate_events(stream.events, width, height)
+    cols = []
+    for k, name in ((1, "x"), (2, "y"), (3, "p")):
+        bad = [i for i, v in enumerate(data[:, k].tolist()) if not v.isdigit()]
+        if bad:
+            raise ValueError(f"{path}: line {bad[0] + 2}: {name} = {data[bad[0], k][:20]!r} is not a non-negative integer")
+        cols.append(data[:, k].astype(np.int64))
+    x, y, p = cols
+    for name, v, limit in (("x", x, width), ("y", y, height)):
+        if (v >= limit).any():
+            i = int(np.flatnonzero(v >= limit)[0])
+            raise ValueError(f"{path}: line {i + 2}: {name} = {int(v[i])} outside the sensor ({width}x{height} in the header)")
+    stream = EventStream(make_events(t, x, y, np.where(p > 0, 1, -1).astype(np.int8)), width, height)
+    try:
+        validate_events(stream.events, width, height)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     return stream
 
 

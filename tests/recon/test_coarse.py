@@ -16,7 +16,7 @@ from recon.densify import DensifyStats
 from recon.raster import Camera, RenderOutput
 from recon.raster.project_ref import project_ref
 from recon.render import camera_from_pose
-from recon.trainer import Trainer
+from recon.trainer import Trainer, TrainingError
 from recon import event_supervision as ev
 from scene_format.reader import SceneDataset
 
@@ -132,6 +132,13 @@ def test_every_method_trains_through_the_stages_and_resumes(method, extra, motio
     resumed = recon.fit(motion_scene, method, overrides=cfg, out_dir=tmp_path / "resumed", progress=False).model
     assert [f for _, f, _, _ in seen] == [2, 2, 2] + [1] * 6          # resumed after the checkpoint at 3
     torch.testing.assert_close(resumed.gaussians.means, model.gaussians.means, rtol=1e-5, atol=1e-6)
+
+
+def test_a_factor_coarser_than_the_image_is_refused_before_training(motion_scene, tmp_path):
+    cfg = {**SMALL, "train.coarse_to_fine.factors": [64], "train.coarse_to_fine.until": [0.5]}
+    with pytest.raises(TrainingError, match="factors: 64 would render cubes's 64x48 images at 1x0 pixels; use factors up to 48"):
+        recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists() or not any((tmp_path / "run").iterdir())
 
 
 def test_the_event_target_is_the_block_mean_of_the_counts(motion_scene, tmp_path, monkeypatch):

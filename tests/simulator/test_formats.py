@@ -187,6 +187,10 @@ def test_bad_recordings_get_one_line_and_leave_nothing(tmp_path):
                       "outside the sensor"),
         "broken.aedat4": (b"#!AER-DAT4.0\r\n" + b"\x00" * 50, "AEDAT4"),
         "broken.bag": (b"#ROSBAG V2.0\n" + b"\x01" * 50, "ROS bag"),
+        "words.txt": (b"hello world\nnot events\n", "words.txt: first line must be 'width height'"),
+        "value.txt": (b"346 260\n0.000001 1 2 1\n0.000002 x 2 1\n", "value.txt: line 3: x = 'x'"),
+        "outside.txt": (b"10 10\n0.000001 50 2 1\n", "outside.txt: line 2: x = 50 outside the sensor"),
+        "columns.txt": (b"10 10\n0.000001 5 2\n", "columns.txt: expected 4 columns"),
     }
     for name, (content, match) in cases.items():
         path = _write(tmp_path / name, content)
