@@ -25,7 +25,7 @@ import numpy as np
 from common.fileio import atomic_output
 from simulator import ros_messages
 from simulator.events import EventStream
-from simulator.vendor_formats import FormatError, _checked, _vendor
+from simulator.vendor_formats import FormatError, checked_stream, vendor_module
 
 EVENT_MSG = "uint16 x\nuint16 y\ntime ts\nbool polarity\n"
 EVENT_ARRAY_MSG = "std_msgs/Header header\nuint32 height\nuint32 width\ndvs_msgs/Event[] events\n"
@@ -34,7 +34,7 @@ EVENT_ARRAY = "dvs_msgs/msg/EventArray"
 
 def typestore(ros2: bool):
     """rosbags' type store of ROS1 Noetic or ROS2 Humble with the dvs_msgs types registered."""
-    typesys = _vendor("rosbags.typesys", "rosbags")
+    typesys = vendor_module("rosbags.typesys", "rosbags")
     store = typesys.get_typestore(typesys.Stores.ROS2_HUMBLE if ros2 else typesys.Stores.ROS1_NOETIC)
     types = {}
     types.update(typesys.get_types_from_msg(EVENT_MSG, "dvs_msgs/msg/Event"))
@@ -76,8 +76,8 @@ def write_bag(path: str | os.PathLike, streams: dict[str, EventStream], ros2: bo
             raise FormatError(f"{path}: {topic}: negative timestamps (ROS times are unsigned: shift the stream)")
     store = typestore(ros2)
     if ros2:
-        return _write_ros2(path, streams, store, _vendor("rosbags.rosbag2", "rosbags"), message_us, extra)
-    rosbag = _vendor("rosbags.rosbag1", "rosbags")
+        return _write_ros2(path, streams, store, vendor_module("rosbags.rosbag2", "rosbags"), message_us, extra)
+    rosbag = vendor_module("rosbags.rosbag1", "rosbags")
     with atomic_output(path) as tmp:
         with rosbag.Writer(tmp) as writer:
             _write_all(writer, store, streams, message_us, False, extra)
@@ -119,8 +119,8 @@ def _open(path: Path):
     if not path.exists():
         raise FileNotFoundError(2, "No such file or directory", str(path))
     if path.is_dir():
-        return _vendor("rosbags.rosbag2", "rosbags").Reader(path)
-    return _vendor("rosbags.rosbag1", "rosbags").Reader(path)
+        return vendor_module("rosbags.rosbag2", "rosbags").Reader(path)
+    return vendor_module("rosbags.rosbag1", "rosbags").Reader(path)
 
 
 def read_bag(path: str | os.PathLike, topic: str | None = None) -> EventStream:
@@ -161,4 +161,4 @@ def read_bag(path: str | os.PathLike, topic: str | None = None) -> EventStream:
     if size is None or size[0] <= 0 or size[1] <= 0:
         raise FormatError(f"{path}: topic {topic} has no message with a sensor size (width, height)")
     cat = {k: np.concatenate(v) if v else np.empty(0, np.int64) for k, v in cols.items()}
-    return _checked(path, cat["t"], cat["x"], cat["y"], cat["p"], size[0], size[1])
+    return checked_stream(path, cat["t"], cat["x"], cat["y"], cat["p"], size[0], size[1])

@@ -29,7 +29,7 @@ class FormatError(ValueError):
     """A file that is not what its format says, or events a format cannot hold (names the file)."""
 
 
-def _vendor(module: str, package: str):
+def vendor_module(module: str, package: str):
     import importlib
     try:
         return importlib.import_module(module)
@@ -61,7 +61,7 @@ def _library_message(exc: BaseException) -> str:
     return text.split("() ", 1)[-1]
 
 
-def _checked(path: Path, t, x, y, p, width: int, height: int) -> EventStream:
+def checked_stream(path: Path, t, x, y, p, width: int, height: int) -> EventStream:
     """EventStream from decoded columns, refusing what our event type cannot hold (naming the file)."""
     t = np.asarray(t, np.int64)
     if len(t) and (np.asarray(x).max() >= width or np.asarray(y).max() >= height):
@@ -119,12 +119,12 @@ def read_raw(path: str | os.PathLike) -> EventStream:
         raise FormatError(f"{path}: {size} bytes of {fmt.upper()} words is not a whole number of {word}-byte words "
                           "(a truncated file?)")
     if fmt == "evt3":
-        ev = _vendor("evt3", "evt3").decode_file(str(path))
-        return _checked(path, ev.t, ev.x, ev.y, np.where(np.asarray(ev.p) > 0, 1, -1), width, height)
-    wizard = _vendor("expelliarmus", "expelliarmus").Wizard(encoding="evt2")
+        ev = vendor_module("evt3", "evt3").decode_file(str(path))
+        return checked_stream(path, ev.t, ev.x, ev.y, np.where(np.asarray(ev.p) > 0, 1, -1), width, height)
+    wizard = vendor_module("expelliarmus", "expelliarmus").Wizard(encoding="evt2")
     with _named(path, ".raw") as named:       # expelliarmus reads only names ending in .raw
         arr = wizard.read(str(named))
-    return _checked(path, arr["t"], arr["x"], arr["y"], np.where(arr["p"] > 0, 1, -1), width, height)
+    return checked_stream(path, arr["t"], arr["x"], arr["y"], np.where(arr["p"] > 0, 1, -1), width, height)
 
 
 # -- iniVation AEDAT4 --------------------------------------------------------------------------------
@@ -133,7 +133,7 @@ AEDAT4_CAMERA = "e4dgs_simulated"
 
 def write_aedat4(path: str | os.PathLike, stream: EventStream, camera_name: str = AEDAT4_CAMERA) -> Path:
     """`stream` as an AEDAT4 file (one event stream `events`, written by dv-processing)."""
-    dv = _vendor("dv_processing", "dv-processing")
+    dv = vendor_module("dv_processing", "dv-processing")
     path = Path(path)
     store = dv.EventStore()
     ev = stream.events
@@ -157,7 +157,7 @@ def write_aedat4(path: str | os.PathLike, stream: EventStream, camera_name: str 
 
 def read_aedat4(path: str | os.PathLike, stream_name: str | None = None) -> EventStream:
     """The event stream of an AEDAT4 file (dv-processing); a file with several asks for `stream_name`."""
-    dv = _vendor("dv_processing", "dv-processing")
+    dv = vendor_module("dv_processing", "dv-processing")
     path = Path(path)
     with _named(path, ".aedat4") as named:    # dv-processing reads only names ending in .aedat4
         try:
@@ -187,5 +187,5 @@ def _read_recording(path: Path, rec, stream_name: str | None) -> EventStream:
         parts.append(batch.numpy())
     arr = np.concatenate(parts) if parts else np.empty(0, [("timestamp", "<i8"), ("x", "<i2"), ("y", "<i2"),
                                                             ("polarity", "i1")])
-    return _checked(path, arr["timestamp"], arr["x"], arr["y"], np.where(arr["polarity"] > 0, 1, -1),
+    return checked_stream(path, arr["timestamp"], arr["x"], arr["y"], np.where(arr["polarity"] > 0, 1, -1),
                     int(resolution[0]), int(resolution[1]))
