@@ -124,8 +124,7 @@ def time_training_states(run_dirs: list[str], factors: list[int], repeats: int) 
                 t0 = time.perf_counter()
                 once(f)
                 times[f].append(time.perf_counter() - t0)
-        with torch.no_grad():
-            radii = once(1).radii.float()
+        radii = once(1).radii.detach().float()
         rows.append((label, len(model), float(radii[radii > 0].median()) if (radii > 0).any() else 0.0,
                      [statistics.median(times[f]) * 1e3 for f in factors]))
     print(f"training states: forward + backward per render (deformation included), cpu backend, 1 thread, "
