@@ -18,7 +18,7 @@ import numpy as np
 from datagen.config import load_preset, resolve_scene
 from datagen.render import render_clip
 from common.config import replace_checked
-from simulator.pixel import rec709_luma
+from common.color import rec709_luma
 from simulator.simulator import simulate
 
 ENGINES = [("workbench", 8), ("cycles", 1), ("cycles", 16)]

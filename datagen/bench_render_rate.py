@@ -17,7 +17,7 @@ import numpy as np
 
 from datagen.config import load_preset, resolve_scene
 from datagen.render import render_clip
-from simulator.pixel import rec709_luma
+from common.color import rec709_luma
 from simulator.simulator import simulate
 
 RATES = (3000, 1500, 750)

@@ -21,7 +21,7 @@ import torch
 
 from e2vid.voxel import normalize_voxel, voxel_grid_events
 from simulator import EventSimulator, SimulatorConfig
-from simulator.pixel import srgb_to_linear
+from common.color import srgb_to_linear
 
 VAL_SEED_BASE = 1 << 40            # held-out sequences use seeds >= this; training seeds stay below
 

@@ -17,7 +17,7 @@ import math
 import numpy as np
 import torch
 
-from simulator.pixel import REC709_LUMA
+from common.color import REC709_LUMA
 
 
 def count_map(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int) -> np.ndarray:

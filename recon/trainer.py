@@ -46,7 +46,7 @@ from recon.method import Method
 from recon.precision import PrecisionChoice, resolve_precision
 from recon.run_folder import ForeignRunError, RunFolder
 from recon.dataset_views import gray_from_srgb
-from simulator.pixel import linear_to_srgb, rec709_luma
+from common.color import linear_to_srgb, rec709_luma
 
 CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
 BUNDLED_PACKAGES = ("recon", "benchmark", "e2vid")   # a method class defined elsewhere is a plug-in
