@@ -255,6 +255,17 @@ def resolve_file_scene(data: dict[str, Any], label: str = "") -> SceneConfig:
     return cfg
 
 
+def own_scene_data(raw: dict[str, Any], preset_overrides: dict[str, Any]) -> dict[str, Any]:
+    """A user's scene YAML with a preset's overrides: the preset sizes the clip (duration, resolution,
+    cameras, ...), but blur targets the YAML names are the user's and stay (a preset's targets are
+    chosen for its built-in scenes: the tiny preset's 9 px is out of reach of most scenes)."""
+    data = deep_merge(raw, preset_overrides)
+    own = raw.get("blur", {}).get("target_px") if isinstance(raw.get("blur"), dict) else None
+    if own is not None:
+        data["blur"] = {**data.get("blur", {}), "target_px": own}
+    return data
+
+
 def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
     """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
     scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
@@ -264,7 +275,7 @@ def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
     else:
         yaml_path = Path(args.scene_config) if args.scene_config else None
         raw = read_scene_yaml(yaml_path) if yaml_path else {}
-        data = deep_merge(raw, preset.scene(cfg.name))
+        data = own_scene_data(raw, preset.scene(cfg.name))
         f = Path(cfg.source.file)
         data["source"] = {**data.get("source", {}), "file": str(f if f.is_absolute() or yaml_path is None
                                                                  else (yaml_path.parent / f).resolve())}

@@ -251,3 +251,20 @@ def test_fbx_usd_and_alembic_scenes_generate_and_an_obj_without_animation_is_ref
     r = _run(["-m", "e4dgs.cli", "dataset", "--scene-file", str(tmp_path / "spinner.obj"), "--preset", str(preset),
               "--out", str(tmp_path / "data_obj")], cwd=tmp_path)
     assert r.returncode == 1 and "spinner.obj: nothing moves" in r.stderr
+
+
+def test_a_scene_yamls_own_blur_targets_outlive_a_presets():
+    """The tiny preset's 2 / 4.5 / 9 px targets are chosen for its cubes; a user's scene YAML that names
+    its own targets keeps them under any preset, which still sizes the clip."""
+    from datagen.config import load_preset
+    from datagen.scene_file import own_scene_data
+
+    tiny = load_preset("tiny")
+    raw = {"name": "walker", "kind": "object", "file": "out/walker.blend",
+           "blur": {"target_px": {"mild": 2.0, "medium": 4.0, "strong": 8.0}}}
+    data = own_scene_data(raw, tiny.scene("walker"))
+    assert data["blur"]["target_px"] == {"mild": 2.0, "medium": 4.0, "strong": 8.0}
+    assert data["blur"]["max_exposure_ms"] == 4.0 and data["duration_s"] == 0.004      # the rest is the preset's
+    assert data["render"]["width"] == 64
+    plain = own_scene_data({"name": "spinner", "kind": "object"}, tiny.scene("spinner"))
+    assert plain["blur"]["target_px"] == {"mild": 2.0, "medium": 4.5, "strong": 9.0}   # no targets of its own
