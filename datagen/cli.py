@@ -146,8 +146,8 @@ def check_event_file(path: Path) -> int:
     from simulator.h5io import EventFileError
 
     if path.suffix != ".h5":
-        raise SystemExit(f"error: {path}: expected a scene folder, a dataset root or an event file (.h5); "
-                         "`e4dgs import` turns other recordings into one")
+        raise SystemExit(f"error: {path}: a file, not a folder, and not an event file (.h5): expected a generated "
+                         "scene, a dataset root or an event file; `e4dgs import` turns other recordings into one")
     try:
         with EventFile(path) as ev:
             span = f", {int(ev.times(0, 1)[0])} .. {int(ev.times(ev.n - 1, ev.n)[0])} us" if ev.n else ""
