@@ -84,7 +84,21 @@ def add_simulate_parser(sub) -> None:
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
     p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
                    help="save a resumable checkpoint every N frames (default 500)")
+    p.add_argument("--format", action="append", default=[], metavar="FORMAT", choices=EXTRA_FORMATS,
+                   help="also write the events in this format beside the .h5 (repeatable): "
+                        + ", ".join(EXTRA_FORMATS) + " (docs/formats.md)")
     p.set_defaults(func=run_simulate)
+
+
+EXTRA_FORMATS = ("aedat4", "evt3", "evt2", "rosbag", "rosbag2", "npz", "txt")
+UNSIGNED_TIME_FORMATS = ("evt3", "evt2", "rosbag", "rosbag2")
+
+
+def extra_output(out: Path, fmt: str) -> Path:
+    """Where `--format fmt` writes beside the event file: its stem with the format's suffix (a ROS2 bag,
+    a folder, as <stem>_rosbag2)."""
+    from simulator.formats import SUFFIX
+    return out.with_name(f"{out.stem}_rosbag2") if fmt == "rosbag2" else out.with_suffix(SUFFIX[fmt])
 
 
 def check_output(out: Path, frames: Path) -> None:
@@ -127,11 +141,26 @@ def run_simulate(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: --fps {args.fps:g}: frames would be less than 1 us apart, and timestamps are whole "
                              "microseconds; the highest frame rate is 1e6 (or give --timestamps)")
         t_us = [t0 + int(round(k * 1e6 / args.fps)) for k in range(len(files))]
+    negative = [f for f in dict.fromkeys(args.format) if f in UNSIGNED_TIME_FORMATS] if min(t_us) < 0 else []
+    if negative:
+        raise SystemExit(f"error: --format {negative[0]}: its times are unsigned, and the frames start at {min(t_us)} us; "
+                         "give a --t0 / timestamps >= 0 or another format")
     try:
         r = simulate_files(files, t_us, args.out, config, args.seed, args.checkpoint_every)
     except ValueError as exc:    # a bad frame: one line naming it
         raise SystemExit(f"error: {exc}") from None
     print(f"{args.out}: {r.n_events} events from {len(files)} frames ({r.width}x{r.height})")
+    if args.format:
+        from simulator.formats import write_stream
+        from simulator.h5io import read_events
+
+        stream = read_events(args.out)
+        for fmt in dict.fromkeys(args.format):
+            try:
+                path = write_stream(extra_output(args.out, fmt), stream, fmt)
+            except ValueError as exc:
+                raise SystemExit(f"error: --format {fmt}: {exc}") from None
+            print(f"{path}: the same events as {fmt}")
     return 0
 
 

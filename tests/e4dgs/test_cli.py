@@ -173,3 +173,19 @@ def test_simulate_files_is_the_library_call_under_the_command(exr_dir, tmp_path)
     with pytest.raises(ValueError, match="frame_005.exr"):     # an exception, never SystemExit
         simulate_files(files, t_us, tmp_path / "bad.h5", progress=False)
     assert not (tmp_path / "bad.h5").exists() and not list(tmp_path.glob(".bad.h5*"))
+
+
+def test_simulate_writes_extra_formats_beside_the_h5(exr_dir, tmp_path):
+    from simulator.formats import read_recording, same_events
+
+    out = tmp_path / "ev.h5"
+    assert main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out),
+                 "--format", "evt3", "--format", "aedat4", "--format", "rosbag2"]) == 0
+    events = read_events(out)
+    for name, fmt in (("ev.raw", "evt3"), ("ev.aedat4", "aedat4"), ("ev_rosbag2", "rosbag2")):
+        back, found = read_recording(tmp_path / name)
+        assert found == fmt and same_events(events, back), name
+    with pytest.raises(SystemExit, match="--format evt2: its times are unsigned"):
+        main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--t0", "-5ms", "--out", str(tmp_path / "neg.h5"),
+              "--format", "evt2"])
+    assert not (tmp_path / "neg.h5").exists()
