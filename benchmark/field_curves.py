@@ -28,7 +28,9 @@ def curve(scene: str, method: str, config: str, field: str, scale: float, out: P
     iters = max(1, int(round(base.train.iterations * scale)))
     overrides = {"train.deform_field.kind": field, "train.snapshots": SNAPSHOTS, "train.iterations": iters, **sets}
     if scale != 1:
-        overrides.update({"train.scale_schedule": True, "train.schedule_reference": base.train.iterations})
+        # the schedule scales along: a recipe already scaled keeps the budget its numbers are written for
+        reference = base.train.schedule_reference if base.train.scale_schedule else base.train.iterations
+        overrides.update({"train.scale_schedule": True, "train.schedule_reference": reference})
     result = recon.fit(scene, method, config, out / f"{method}_{field}", overrides=overrides, progress=False,
                         keep_initial=True)
     dataset = SceneDataset(scene)
