@@ -8,6 +8,7 @@ import fcntl
 import hashlib
 import os
 import re
+import shutil
 from pathlib import Path
 from typing import Iterator
 
@@ -28,6 +29,14 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _remove(p: Path) -> None:
+    """A file or a whole folder (an output written as a folder, e.g. a ROS2 bag)."""
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        p.unlink(missing_ok=True)
+
+
 def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
     """Delete temporaries of `path` (`.<name>.<pid>.tmp`) whose writing process no longer runs (a
     run killed while writing); returns what was removed."""
@@ -39,7 +48,7 @@ def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
     for p in path.parent.iterdir():
         m = pattern.match(p.name)
         if m and int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1))):
-            p.unlink(missing_ok=True)
+            _remove(p)
             removed.append(p)
     return removed
 
@@ -89,10 +98,11 @@ def output_lock(path: str | os.PathLike) -> Iterator[Path]:
 
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path to write; on success rename it to `path`, on failure delete it.
+    """Yield a temporary path to write (a file, or a folder the block creates); on success rename it to
+    `path`, on failure delete it.
 
     Nothing appears at `path` unless the `with` block finished without an exception; temporaries
-    of `path` left by killed runs are removed first.
+    of `path` left by killed runs are removed first. A folder output needs `path` not to exist.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -106,8 +116,8 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
             raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        if tmp.exists() or tmp.is_symlink():
+            _remove(tmp)
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:

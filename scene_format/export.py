@@ -4,11 +4,12 @@ simulator.rosbag_io)."""
 from __future__ import annotations
 
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
 
+from common.fileio import atomic_output
+from scene_format.cameras import rotmat_to_quat
 from scene_format.reader import SceneDataset
 from simulator import formats, rosbag_io
 from simulator.h5io import read_events
@@ -25,16 +26,10 @@ def export_scene(scene_dir: str | os.PathLike, fmt: str, out: str | os.PathLike,
                                     extra=lambda w, store, ser: _scene_topics(ds, w, store, ser))]
     if out.exists():
         raise formats.FormatError(f"{out}: exists; the cameras' files go into a new folder")
-    tmp = out.with_name(f".{out.name}.tmp-{os.getpid()}")      # complete, or not there at all
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    try:
+    with atomic_output(out) as tmp:                             # complete, or not there at all
+        tmp.mkdir()
         for k, s in enumerate(streams.values()):
             formats.write_stream(tmp / f"cam{k}{formats.SUFFIX[fmt]}", s, fmt)
-        tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return sorted(out.iterdir())
 
 
@@ -70,33 +65,15 @@ def _scene_topics(ds: SceneDataset, writer, store, serialize) -> None:
         image_conn = add(f"/cam{k}/image_raw", "sensor_msgs/msg/Image")
         for rec in (r for r in records if r.camera == k):
             c2w = ds.pose(k, rec.t_us)
-            q = _quaternion(c2w[:3, :3])
+            q = rotmat_to_quat(c2w[:3, :3])                 # (w, x, y, z), w >= 0
             pose = T["geometry_msgs/msg/PoseStamped"](
                 header=header(rec.t_us, "world"),
                 pose=T["geometry_msgs/msg/Pose"](
                     position=T["geometry_msgs/msg/Point"](x=float(c2w[0, 3]), y=float(c2w[1, 3]), z=float(c2w[2, 3])),
-                    orientation=T["geometry_msgs/msg/Quaternion"](x=q[1], y=q[2], z=q[3], w=q[0])))
+                    orientation=T["geometry_msgs/msg/Quaternion"](x=float(q[1]), y=float(q[2]), z=float(q[3]), w=float(q[0]))))
             writer.write(pose_conn, rec.t_us * 1000, serialize(pose, "geometry_msgs/msg/PoseStamped"))
             rgb = np.round(ds.load_image(rec.path) * 255).astype(np.uint8)
             image = T["sensor_msgs/msg/Image"](header=header(rec.t_us, frame), height=rgb.shape[0], width=rgb.shape[1],
                                                encoding="rgb8", is_bigendian=0, step=rgb.shape[1] * 3,
                                                data=rgb.reshape(-1))
             writer.write(image_conn, rec.t_us * 1000, serialize(image, "sensor_msgs/msg/Image"))
-
-
-def _quaternion(R: np.ndarray) -> tuple[float, float, float, float]:
-    """(w, x, y, z) of a rotation matrix (Shepperd's method: the largest of the four first)."""
-    tr = np.trace(R)
-    cands = [1 + tr, 1 + R[0, 0] - R[1, 1] - R[2, 2], 1 - R[0, 0] + R[1, 1] - R[2, 2], 1 - R[0, 0] - R[1, 1] + R[2, 2]]
-    i = int(np.argmax(cands))
-    s = 2.0 * np.sqrt(cands[i])
-    if i == 0:
-        q = (s / 4, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s)
-    elif i == 1:
-        q = ((R[2, 1] - R[1, 2]) / s, s / 4, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s)
-    elif i == 2:
-        q = ((R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, s / 4, (R[1, 2] + R[2, 1]) / s)
-    else:
-        q = ((R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4)
-    q = np.asarray(q) * (1 if q[0] >= 0 else -1)
-    return tuple(float(v) for v in q)

@@ -16,7 +16,6 @@ several asks which).
 from __future__ import annotations
 
 import os
-import shutil
 import struct
 from pathlib import Path
 
@@ -74,13 +73,13 @@ def write_bag(path: str | os.PathLike, streams: dict[str, EventStream], ros2: bo
     for topic, s in streams.items():
         if len(s) and int(s.events["t"][0]) < 0:
             raise FormatError(f"{path}: {topic}: negative timestamps (ROS times are unsigned: shift the stream)")
+    if ros2 and path.exists():
+        raise FormatError(f"{path}: exists (a ROS2 bag is a folder; choose a new name)")
     store = typestore(ros2)
-    if ros2:
-        return _write_ros2(path, streams, store, vendor_module("rosbags.rosbag2", "rosbags"), message_us, extra)
-    rosbag = vendor_module("rosbags.rosbag1", "rosbags")
-    with atomic_output(path) as tmp:
-        with rosbag.Writer(tmp) as writer:
-            _write_all(writer, store, streams, message_us, False, extra)
+    rosbag = vendor_module("rosbags.rosbag2" if ros2 else "rosbags.rosbag1", "rosbags")
+    with atomic_output(path) as tmp:     # a ROS2 bag is a folder: written whole under the temporary name
+        with (rosbag.Writer(tmp, version=8) if ros2 else rosbag.Writer(tmp)) as writer:
+            _write_all(writer, store, streams, message_us, ros2, extra)
     return path
 
 
@@ -92,21 +91,6 @@ def _write_all(writer, store, streams, message_us, ros2, extra):
             writer.write(conn, t_ns, raw)
     if extra is not None:
         extra(writer, store, store.serialize_cdr if ros2 else store.serialize_ros1)
-
-
-def _write_ros2(path: Path, streams, store, rosbag, message_us, extra) -> Path:
-    if path.exists():
-        raise FormatError(f"{path}: exists (a ROS2 bag is a folder; choose a new name)")
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
-    try:
-        with rosbag.Writer(tmp, version=8) as writer:
-            _write_all(writer, store, streams, message_us, True, extra)
-        tmp.rename(path)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return path
 
 
 def bag_topics(path: str | os.PathLike) -> dict[str, str]:
