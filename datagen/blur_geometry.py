@@ -17,6 +17,8 @@ choosing an exposure among hundreds of candidates does not keep every path in me
 """
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,6 +153,19 @@ class LevelChoice:
     level: str
     target_px: float | None       # None: a level declared by its exposure
     n_frames: int
+    fit_factor: float = 1.0       # the target is the declared one x this (BlurConfig.fit)
+
+
+def fit_targets(medians_px: np.ndarray, target_px: dict[str, float], tolerance: float) -> tuple[dict[str, float], float]:
+    """(targets, factor): the targets x one factor that puts the strongest at the longest exposure's
+    median blur max(medians_px), when the strongest is beyond it by more than `tolerance`; else
+    (target_px, 1.0). medians_px [n_max]: median blur (px) of exposures of 1..n_max frames."""
+    finite = medians_px[np.isfinite(medians_px) & (medians_px > 0)]
+    top = max(target_px.values())
+    if not len(finite) or top <= float(finite.max()) * (1 + tolerance):
+        return dict(target_px), 1.0
+    factor = float(finite.max()) / top
+    return {level: px * factor for level, px in target_px.items()}, factor
 
 
 def fixed_exposures(exposure_ms: dict[str, float], fps: float, n_timestamps: int, scene: str) -> list[LevelChoice]:
@@ -167,10 +182,12 @@ def fixed_exposures(exposure_ms: dict[str, float], fps: float, n_timestamps: int
 
 
 def choose_exposures(medians_px: np.ndarray, target_px: dict[str, float], tolerance: float, fps: float,
-                     scene: str, limit_reason: str) -> list[LevelChoice]:
+                     scene: str, limit_reason: str, strict: bool = True) -> list[LevelChoice]:
     """Per level the exposure n (frames) whose median blur medians_px[n - 1] is closest to the target
     in ratio. A level missed by more than `tolerance` (relative), or two levels on one exposure, is a
-    ConfigError naming the scene and the level; limit_reason says what bounds the longest exposure."""
+    ConfigError naming the scene and the level; limit_reason says what bounds the longest exposure.
+    strict=False (BlurConfig.fit): no miss is refused, and a level whose closest exposure a weaker level
+    took takes the closest longer one (an error only when none is left)."""
     out = []
     logm = np.log(np.where(medians_px > 0, medians_px, np.nan))
     for level in sorted(target_px, key=target_px.get):
@@ -178,9 +195,15 @@ def choose_exposures(medians_px: np.ndarray, target_px: dict[str, float], tolera
         if np.all(np.isnan(logm)):
             raise ConfigError(f"scene {scene}, blur level {level}: nothing in view moves, so no exposure blurs "
                               f"(target {target:g} px)")
-        n = int(np.nanargmin(np.abs(logm - np.log(target)))) + 1
+        err = np.abs(logm - np.log(target))
+        if not strict and out:
+            err[:out[-1].n_frames] = np.nan                   # longer than the weaker level's exposure
+        if np.all(np.isnan(err)):
+            raise ConfigError(f"scene {scene}, blur level {level}: no exposure is left longer than level "
+                              f"{out[-1].level}'s ({out[-1].n_frames} frames, {limit_reason})")
+        n = int(np.nanargmin(err)) + 1
         got = float(medians_px[n - 1])
-        if abs(got / target - 1) > tolerance:
+        if strict and abs(got / target - 1) > tolerance:
             longest = float(np.nanmax(medians_px))
             if target > got:
                 why = (f"the longest exposure ({len(medians_px)} frames, {1e3 * len(medians_px) / fps:.2f} ms, "
@@ -240,7 +263,11 @@ def choose_levels(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndar
             lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_max, T)
             first, last = candidate_windows(int(centers[j]), n_max, T, offset=lo)
             hist.add(window_path_px(cum, first, last))
-        choices = choose_exposures(hist.quantile(0.5), blur_cfg.target_px, blur_cfg.tolerance, fps, scene, limit)
+        medians = hist.quantile(0.5)
+        targets, factor = (fit_targets(medians, blur_cfg.target_px, blur_cfg.tolerance) if blur_cfg.fit
+                           else (blur_cfg.target_px, 1.0))
+        choices = [dataclasses.replace(c, fit_factor=factor) for c in
+                   choose_exposures(medians, targets, blur_cfg.tolerance, fps, scene, limit, strict=not blur_cfg.fit)]
     return choices + fixed_exposures(blur_cfg.exposure_ms, fps, T, scene)
 
 
@@ -295,7 +322,9 @@ def _report(choices: list[LevelChoice], stats: dict, blur_cfg, fps: float, cente
     levels = {}
     for c in choices:
         cams = [np.concatenate(per_cam[(c.n_frames, k)] or [np.zeros(0)]) for k in range(C)]
-        levels[c.level] = {"target_px": c.target_px, "n_frames": c.n_frames,
+        fitted = ({"fitted": True, "declared_target_px": round(c.target_px / c.fit_factor, 6)}
+                  if blur_cfg.fit and c.target_px is not None else {})
+        levels[c.level] = {"target_px": c.target_px, **fitted, "n_frames": c.n_frames,
                            "exposure_ms": round(1e3 * c.n_frames / fps, 4), **summarize(np.concatenate(cams)),
                            "per_camera": [summarize(v) for v in cams]}
     px_per_frame = ({"median": round(float(np.median(steps)), 3), "p90": round(float(np.percentile(steps, 90)), 3),

@@ -278,6 +278,11 @@ class SceneJob:
                 print(f"{job.dir.name}: blur exposures " + ", ".join(
                     f"{name} {lv['n_frames']} frames ({lv['exposure_ms']:.2f} ms): {lv['median_px']:.1f} px"
                     for name, lv in levels.items()), flush=True)
+                fitted = {name: lv for name, lv in levels.items() if lv.get("fitted")}
+                if fitted:
+                    print(f"{job.dir.name}: blur targets fitted to this scene and size (target -> got): "
+                          + ", ".join(f"{name} {lv['declared_target_px']:g} -> {lv['median_px']:.2f} px"
+                                      for name, lv in fitted.items()), flush=True)
 
     def dynamic_views(self) -> list[tuple[int, int]]:
         """(camera, kept index) of the views with a dynamic mask: the test views, and the contact sheet's."""

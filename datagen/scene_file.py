@@ -18,7 +18,7 @@ import numpy as np
 
 from common.config import ConfigError, from_dict
 from scene_format.cameras import intrinsics_from_fov, project
-from scene_format.config import SceneConfig, deep_merge, read_scene_yaml
+from scene_format.config import RenderConfig, SceneConfig, deep_merge, read_scene_yaml
 from datagen.config import file_scene_name
 
 IMPORTERS = {".glb": ("import_scene", "gltf"), ".gltf": ("import_scene", "gltf"), ".fbx": ("import_scene", "fbx"),
@@ -257,21 +257,40 @@ def resolve_file_scene(data: dict[str, Any], label: str = "") -> SceneConfig:
 
 def own_scene_data(raw: dict[str, Any], preset_overrides: dict[str, Any]) -> dict[str, Any]:
     """A user's scene YAML with a preset's overrides: the preset sizes the clip (duration, resolution,
-    cameras, ...), but blur targets the YAML names are the user's and stay (a preset's targets are
-    chosen for its built-in scenes: the tiny preset's 9 px is out of reach of most scenes)."""
+    cameras, ...), but blur targets the YAML names are the user's and stay, in pixels at the width the
+    YAML renders at (its render.width, else the default): a preset rendering at another width scales
+    them by the ratio of widths and fits them (BlurConfig.fit: closest exposures, never refused), as it
+    fits targets the preset supplies, which were chosen for its built-in scenes (the tiny preset's 9 px
+    is out of reach of most). Targets used at the width they were written for are exact or refused."""
     data = deep_merge(raw, preset_overrides)
     own = raw.get("blur", {}).get("target_px") if isinstance(raw.get("blur"), dict) else None
     if own is not None:
-        data["blur"] = {**data.get("blur", {}), "target_px": own}
+        own_width, width = _render_width(raw), _render_width(data)
+        scale = width / own_width if _positive_number(width) and _positive_number(own_width) else 1.0
+        fit = isinstance(own, dict) and scale != 1.0
+        if fit:
+            own = {level: px * scale if _positive_number(px) else px for level, px in own.items()}
+        data["blur"] = {**data.get("blur", {}), "target_px": own, **({"fit": True} if fit else {})}
+    elif isinstance(data.get("blur"), dict) and data["blur"].get("target_px"):
+        data["blur"] = {**data["blur"], "fit": True}
     return data
+
+
+def _render_width(data: dict[str, Any]):
+    render = data.get("render")
+    return render.get("width", RenderConfig.width) if isinstance(render, dict) else RenderConfig.width
+
+
+def _positive_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0
 
 
 def file_scene_config(args, preset, cfg: SceneConfig | None) -> SceneConfig:
     """The resolved config of a scene from a file: --scene-file with the preset's overrides, or a
     scene YAML with `source: {file: ...}` (its path relative to the YAML's folder)."""
     if args.scene_file:
-        data = deep_merge({"name": file_scene_name(args.scene_file), "kind": args.kind, "source": {"file": str(args.scene_file.resolve())}},
-                          preset.overrides)
+        data = own_scene_data({"name": file_scene_name(args.scene_file), "kind": args.kind,
+                               "source": {"file": str(args.scene_file.resolve())}}, preset.overrides)
     else:
         yaml_path = Path(args.scene_config) if args.scene_config else None
         raw = read_scene_yaml(yaml_path) if yaml_path else {}

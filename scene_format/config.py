@@ -125,12 +125,20 @@ class BlurConfig:
     median over every camera and blurred frame is closest to the target; a level whose closest
     exposure misses the target by more than `tolerance` (relative) is an error, never a clamp.
     sample_stride_px: the blur length is measured on every n-th pixel in x and y.
+    fit: the targets are guides rather than requirements: a ladder whose strongest target is beyond the
+    longest exposure's blur is scaled by one factor so that the strongest is that blur (the levels keep
+    their ratios), and each level then takes the closest exposure not taken by a weaker level, however
+    far it lands (the manifest records the target and what it got). Set for a user's scene under a
+    preset that renders it at another size than its targets were written for, or with the preset's
+    own targets (chosen for the preset's scenes); targets used at the size they were written for are
+    never fitted.
     """
     target_px: dict[str, float] = field(default_factory=dict)
     exposure_ms: dict[str, float] = field(default_factory=dict)   # levels of a fixed exposure (real-time ms)
     tolerance: float = 0.15
     max_exposure_ms: float = 40.0
     sample_stride_px: int = 4
+    fit: bool = False
 
     def __post_init__(self):
         check_positive(self, "tolerance", "max_exposure_ms", "sample_stride_px")

@@ -79,6 +79,7 @@ def test_the_worked_examples_generate(tmp_path):
     preset.write_text(TINY_PRESET)
     walker = tmp_path / "walker.yaml"
     walker.write_text("name: walker\nkind: object\nsource: {file: files/walker.blend}\n"
+                      "render: {width: 64, height: 48}   # the targets are pixels at this size\n"
                       "blur: {target_px: {mild: 0.8, strong: 1.5}, max_exposure_ms: 4.0, sample_stride_px: 2}\n")
     r = _run(["-m", "e4dgs.cli", "dataset", "--scene-config", str(walker), "--scene-file",     # both, side by side
               str(tmp_path / "files" / "spinner.glb"), "--jobs", "2", "--preset", str(preset), "--out", str(tmp_path / "data")])
@@ -99,6 +100,25 @@ def test_the_worked_examples_generate(tmp_path):
               str(tmp_path / "other" / "spinner.glb"), "--preset", str(preset), "--out", str(tmp_path / "data")])
     assert r.returncode != 0 and "spinner.glb: scene name 'spinner' is already taken" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
+    # The built-in tiny preset (64 x 48) takes both examples as the README writes them: the walker
+    # YAML's 2 / 4 / 8 px (at the default 346 px width) scale to 64 / 346 of that, and the spinner,
+    # with no targets of its own, has the preset's 2 / 4.5 / 9 px fitted to its reach.
+    (tmp_path / "ex").mkdir()
+    (tmp_path / "ex" / "walker.yaml").write_text((ROOT / "examples" / "scenes" / "walker.yaml").read_text())
+    (tmp_path / "ex" / "out").symlink_to(tmp_path / "files")
+    r = _run(["-m", "e4dgs.cli", "dataset", "--preset", "tiny", "--scene-config", str(tmp_path / "ex" / "walker.yaml"),
+              "--scene-file", str(tmp_path / "files" / "spinner.glb"), "--out", str(tmp_path / "tiny")], cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    walker_levels = json.loads((tmp_path / "tiny" / "walker" / "manifest.json").read_text())["blur"]["levels"]
+    assert walker_levels["strong"]["declared_target_px"] == pytest.approx(8.0 * 64 / 346)
+    spinner_levels = json.loads((tmp_path / "tiny" / "spinner" / "manifest.json").read_text())["blur"]["levels"]
+    assert spinner_levels["strong"]["declared_target_px"] == 9.0 and spinner_levels["strong"]["target_px"] < 9.0
+    ratios = [lv["target_px"] / lv["declared_target_px"] for lv in spinner_levels.values()]
+    assert max(ratios) - min(ratios) < 1e-9                                       # one factor: the ladder keeps its ratios
+    for levels in (walker_levels, spinner_levels):                                # distinct, increasing exposures
+        frames = [levels[k]["n_frames"] for k in ("mild", "medium", "strong")]
+        assert frames == sorted(set(frames))
+    assert "spinner: blur targets fitted to this scene and size" in r.stdout
 
 
 STATIC = """
@@ -263,8 +283,34 @@ def test_a_scene_yamls_own_blur_targets_outlive_a_presets():
     raw = {"name": "walker", "kind": "object", "file": "out/walker.blend",
            "blur": {"target_px": {"mild": 2.0, "medium": 4.0, "strong": 8.0}}}
     data = own_scene_data(raw, tiny.scene("walker"))
-    assert data["blur"]["target_px"] == {"mild": 2.0, "medium": 4.0, "strong": 8.0}
+    s = 64 / 346                                    # written for the default width, rendered at the preset's
+    assert data["blur"]["target_px"] == pytest.approx({"mild": 2.0 * s, "medium": 4.0 * s, "strong": 8.0 * s})
+    assert data["blur"]["fit"] is True                           # written for another size: closest exposures
     assert data["blur"]["max_exposure_ms"] == 4.0 and data["duration_s"] == 0.004      # the rest is the preset's
     assert data["render"]["width"] == 64
+    at_own_width = own_scene_data({**raw, "render": {"width": 64}}, tiny.scene("walker"))
+    assert at_own_width["blur"]["target_px"] == {"mild": 2.0, "medium": 4.0, "strong": 8.0}
+    assert not at_own_width["blur"].get("fit")                   # at their own size: exact, or refused
     plain = own_scene_data({"name": "spinner", "kind": "object"}, tiny.scene("spinner"))
     assert plain["blur"]["target_px"] == {"mild": 2.0, "medium": 4.5, "strong": 9.0}   # no targets of its own
+    assert plain["blur"]["fit"] is True                                                  # ... so the preset's, fitted
+
+
+def test_fit_targets_scales_the_ladder_to_the_longest_exposure_only_when_out_of_reach():
+    from datagen.blur_geometry import fit_targets
+    medians = np.array([0.0, 1.0, 2.0, 3.0, np.nan])          # exposures of 1..5 frames, the longest unmeasured
+    targets = {"mild": 2.0, "medium": 4.5, "strong": 9.0}
+    fitted, f = fit_targets(medians, targets, 0.15)
+    assert f == pytest.approx(3.0 / 9.0) and fitted["strong"] == pytest.approx(3.0)
+    assert fitted["mild"] / fitted["strong"] == pytest.approx(2.0 / 9.0)
+    same, f1 = fit_targets(medians, {"mild": 1.0, "strong": 3.4}, 0.15)            # 3.4 <= 3 x 1.15: reachable
+    assert f1 == 1.0 and same == {"mild": 1.0, "strong": 3.4}
+    from common.config import ConfigError
+    from datagen.blur_geometry import choose_exposures
+    close = {"mild": 1.9, "medium": 2.1}                   # both closest to the 3-frame exposure (2 px)
+    with pytest.raises(ConfigError, match="same exposure"):
+        choose_exposures(medians, close, 0.15, 3000.0, "s", "the clip")
+    got = choose_exposures(medians, close, 0.15, 3000.0, "s", "the clip", strict=False)
+    assert [c.n_frames for c in got] == [3, 4]              # the stronger takes the closest longer one
+    assert [c.n_frames for c in choose_exposures(medians, {"mild": 0.2}, 0.15, 3000.0, "s", "the clip",
+                                                 strict=False)] == [2]          # a miss of 5x is not refused
