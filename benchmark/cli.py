@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from common.argtypes import add_ray_arguments, name_list, ray_options
@@ -157,4 +158,10 @@ def run_bench_cli(args: argparse.Namespace) -> int:
     rows = read_results(out / "results.jsonl")
     paths = write_report(rows, out, header, cfg)
     print("bench: wrote " + ", ".join(str(p) for p in paths))
+    failed = [r["key"] for r in rows if r.get("status") == "failed" and (not scenes or r.get("scene") in scenes)
+              and (not cells or r.get("cell") in cells)]
+    if failed:
+        print(f"bench: {len(failed)} job(s) failed, marked 'failed' in the tables (their errors are in "
+              f"{out / 'results.jsonl'}; the next run retries them): {', '.join(failed)}", file=sys.stderr)
+        return 1
     return 0

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from benchmark.config import BenchConfig, Job
-from benchmark.job_run import by_folder, job_data_dir, row_summary, run_folder
+from benchmark.job_run import by_folder, failed_row, job_data_dir, row_summary, run_folder
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 
 
@@ -60,7 +60,7 @@ def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root
                 for row in outcome.value:
                     log(f"bench {row_summary(row)}")
             else:
-                record([{**j.identity(), "status": "failed", "error": outcome.error} for j in groups[outcome.key]])
+                record([failed_row(j, outcome.error) for j in groups[outcome.key]])
                 log(f"bench {outcome.key}: FAILED after {opts.retries} retries: {outcome.error}")
 
         run_tasks(specs, opts, done, desc="bench", progress=progress)

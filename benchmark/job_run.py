@@ -175,16 +175,31 @@ def run_jobs_here(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root: 
                   record: Callable[[list[dict]], None], progress: bool = True,
                   log: Callable[[str], None] = print) -> None:
     """The serial executor: the jobs in this process one after another, in their order; a job whose
-    training folder an earlier job of this call trained and scored completely reuses its row (an
-    error stops the run; the recorded rows stay and a later run resumes the rest)."""
+    training folder an earlier job of this call trained and scored completely reuses its row. A job
+    that fails (a method's error, a plug-in's included) costs only its own cells, as on Ray: its row is
+    recorded with status "failed" and the error, the other jobs run, and a later run retries it. A
+    kill (KeyboardInterrupt) stops the run; the recorded rows stay and a later run resumes the rest."""
     trained: dict[str, dict] = {}
+    failed: dict[str, str] = {}                     # training folder -> its error
     t0 = time.time()
     for n, job in enumerate(todo, 1):
         log(f"bench [{n}/{len(todo)}] {job.key} ({job.method}, {time.time() - t0:.0f} s so far)")
         earlier = trained.get(job.folder)
-        if earlier is not None and complete_row(earlier, job, cfg, data_root):
+        if job.folder in failed:
+            row = failed_row(job, failed[job.folder])
+        elif earlier is not None and complete_row(earlier, job, cfg, data_root):
             row = reused_row(job, earlier)
         else:
-            row = trained[job.folder] = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
+            try:
+                row = trained[job.folder] = run_job(job, cfg, data_root, out_root, progress, method_cfg=resolved[job.key])
+            except Exception as exc:                 # noqa: BLE001 -- one job's failure is its row, not the run's end
+                failed[job.folder] = f"{type(exc).__name__}: {exc}"
+                row = failed_row(job, failed[job.folder])
         record([row])
-        log(f"bench [{n}/{len(todo)}] {row_summary(row)}")
+        log(f"bench [{n}/{len(todo)}] " + (f"{job.key}: FAILED: {row['error']}" if row.get("status") == "failed"
+                                           else row_summary(row)))
+
+
+def failed_row(job: Job, error: str) -> dict:
+    """The results row of a job that failed: its identity, status "failed" and the error (one line)."""
+    return {**job.identity(), "status": "failed", "error": " ".join(error.split())[:2000]}

@@ -52,7 +52,9 @@ FORMAT_VERSION = 1
 
 def config_fingerprint(cfg: SceneConfig) -> str:
     """What a finished scene folder was made with. A scene built in code leaves `source` out, so
-    folders generated before scenes could come from files keep their fingerprint."""
+    folders generated before scenes could come from files keep their fingerprint; `formats` (extra
+    exports, datagen.exports) changes nothing in the scene and is left out; `blur.fit` is left out
+    at its default, so folders generated before it existed keep theirs."""
     import yaml
 
     from common.config import to_dict
@@ -60,6 +62,9 @@ def config_fingerprint(cfg: SceneConfig) -> str:
     data = to_dict(cfg)
     if not cfg.source.file:
         data.pop("source")
+    data.pop("formats")
+    if not cfg.blur.fit:
+        data["blur"].pop("fit")
     text = yaml.safe_dump(data, sort_keys=False)
     return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{text}".encode()).hexdigest()
 
@@ -125,6 +130,7 @@ class SceneJob:
         cfg = self.cfg
         if self.is_complete():
             print(f"{self.dir}: complete, skipped")
+            self._exports()
             return self.dir
         t_start = time.perf_counter()
         cams = R.build_scene(cfg, self.intr)
@@ -171,7 +177,16 @@ class SceneJob:
             variant._write_metadata(secs)
         self._write_metadata(seconds[0])
         ckpt.remove()
+        self._exports()
         return self.dir
+
+    def _exports(self) -> None:
+        """The extra formats the config asks for, of the scene and its variants (datagen.exports)."""
+        if self.cfg.formats:
+            from datagen.exports import ensure_exports
+
+            for job in self.jobs:
+                ensure_exports(job.dir, self.cfg.formats)
 
     @property
     def jobs(self) -> list["SceneJob"]:

@@ -236,6 +236,8 @@ class SceneConfig:
     speed: float = 1.0     # this folder's time compression: the clip lasts duration_s / speed real seconds
     speeds: SpeedConfig = field(default_factory=SpeedConfig)   # speed variants written beside the scene
     source: SourceConfig = field(default_factory=SourceConfig)   # built in code, or a file's scene
+    # extra event formats written beside the HDF5 (datagen.exports; simulator.formats.FORMATS but h5)
+    formats: tuple[str, ...] = ()
 
     def __post_init__(self):
         check_positive(self, "duration_s")
@@ -244,6 +246,14 @@ class SceneConfig:
                               f"or leading dot), got {self.name!r}: the scene is written to <out>/<name>")
         if not self.speed >= 1:
             raise ConfigError(f"speed: expected a time compression factor >= 1, got {self.speed!r}")
+        from simulator.formats import FORMATS
+
+        for fmt in self.formats:
+            if fmt not in FORMATS or fmt == "h5":
+                raise ConfigError(f"formats: {fmt!r} is not an extra event format (expected any of "
+                                  f"{', '.join(f for f in FORMATS if f != 'h5')}; the HDF5 is always written)")
+        if len(set(self.formats)) != len(self.formats):
+            raise ConfigError(f"formats: a format is named twice ({list(self.formats)})")
         if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
             raise ConfigError(f"motion_strength: expected a value >= 0, got {self.motion_strength!r}")
 

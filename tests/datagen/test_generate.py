@@ -421,3 +421,43 @@ def test_d3dgs_reader_misplaces_our_cameras_and_the_documented_patch_fixes_it(ti
             got = _d3dgs_camera(frame, meta["camera_angle_x"], w, h, patched)(point)
             worst[patched] = max(worst[patched], float(np.abs(got - truth).max()))
     assert worst[True] < 1e-6 and worst[False] > 2.0
+
+
+def test_a_preset_asking_for_formats_writes_them_beside_the_hdf5_and_check_verifies_them(tmp_path):
+    """`formats:` in a preset: every camera as AEDAT4 and EVT 3.0 and the scene as a ROS bag under
+    exports/, the same events as the canonical HDF5, listed in the manifest (SHA-256) so `check`
+    verifies them; the fingerprint ignores the field, so a complete scene that gains a format gets
+    only that export, without being generated again."""
+    from simulator.formats import read_recording, same_events
+
+    plain = tmp_path / "plain.yaml"
+    plain.write_text((ROOT / "configs" / "dataset_tiny.yaml").read_text())
+    assert generate(tmp_path / "d", preset=str(plain)).returncode == 0
+    scene = tmp_path / "d" / "cubes"
+    before = json.loads((scene / "manifest.json").read_text())
+    asks = tmp_path / "formats.yaml"
+    asks.write_text(plain.read_text().replace("overrides:\n", "overrides:\n  formats: [aedat4, evt3, rosbag]\n"))
+    r = generate(tmp_path / "d", preset=str(asks))
+    assert r.returncode == 0 and "complete, skipped" in r.stdout, r.stderr[-1500:]
+    after = json.loads((scene / "manifest.json").read_text())
+    assert after["config_sha256"] == before["config_sha256"] and after["created_unix"] == before["created_unix"]
+    assert set(after["exports"]) == {"aedat4", "evt3", "rosbag"}
+    assert after["exports"]["rosbag"] == ["exports/cubes.bag"]
+    for k in range(2):
+        ours = read_events(scene / "events" / f"cam{k}.h5")
+        for fmt, ext in (("aedat4", "aedat4"), ("evt3", "raw")):
+            rel = f"exports/{fmt}/cam{k}.{ext}"
+            assert rel in after["exports"][fmt] and after["files"][rel]["bytes"] == (scene / rel).stat().st_size
+            assert same_events(read_recording(scene / rel)[0], ours), rel
+    for rel in after["exports"]["rosbag"]:
+        assert rel in after["files"]
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "check", str(scene)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0 and "OK" in r.stdout, r.stdout + r.stderr
+    (scene / "exports" / "evt3" / "cam1.raw").write_bytes(b"tampered")
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "check", str(scene)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "exports/evt3/cam1.raw" in (r.stdout + r.stderr)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(plain.read_text().replace("overrides:\n", "overrides:\n  formats: [aedat5]\n"))
+    r = generate(tmp_path / "e", preset=str(bad))
+    assert r.returncode == 2 and "formats: 'aedat5' is not an extra event format" in r.stderr
+    assert not (tmp_path / "e").exists()

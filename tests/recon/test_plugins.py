@@ -157,3 +157,47 @@ def test_training_that_ends_with_non_finite_parameters_saves_no_model(motion_sce
         recon.fit(motion_scene, "d3dgs", overrides={**TINY, "train.checkpoint_every": 5}, out_dir=tmp_path / "run",
                   progress=False)
     assert not (tmp_path / "run" / "model.pt").exists() and (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+def test_a_failing_plugin_costs_only_its_own_cells_in_a_bench(motion_scene, tmp_path, monkeypatch, capsys):
+    """Serial bench with a plug-in whose step raises beside a working cell: the working cell is scored,
+    the plug-in's cell is a 'failed' row naming the plug-in, and the tables say so."""
+    from benchmark.config import BenchConfig, CellSpec
+    from benchmark.report import write_report
+    from benchmark.runner import run_bench
+    from common.config import build_config
+    from recon.methods.d3dgs import D3DGS
+
+    class Broken(D3DGS):
+        name = "broken_d3dgs"
+
+        def step(self, trainer, it):
+            return 1 / 0
+
+    monkeypatch.setitem(registry.METHODS, "broken_d3dgs", Broken)
+    over = {**TINY, "frames": "sharp"}
+    cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name],
+                                     "cells": {"broken": CellSpec("broken_d3dgs", overrides=over),
+                                               "good": CellSpec("d3dgs", overrides=over)}})
+    lines = []
+    rows = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "runs", studies=("main",), progress=False,
+                     log=lines.append)
+    by_cell = {r["cell"]: r for r in rows}
+    assert by_cell["good"].get("status") != "failed" and np.isfinite(by_cell["good"]["psnr"])
+    assert by_cell["broken"]["status"] == "failed"
+    assert "method 'broken_d3dgs' (plug-in class" in by_cell["broken"]["error"] and "ZeroDivisionError" in by_cell["broken"]["error"]
+    assert any("broken: FAILED" in ln for ln in lines)
+    write_report(rows, tmp_path / "runs", "", cfg)
+    assert "failed" in (tmp_path / "runs" / "leaderboard.md").read_text()
+    # `e4dgs bench` exits 1 naming the failed job, after writing the tables (here from the rows above)
+    import argparse
+
+    from benchmark.cli import run_bench_cli
+
+    preset = tmp_path / "mine.yaml"
+    preset.write_text(f"dataset: tiny_motion\nscenes: [{motion_scene.name}]\ncells:\n  broken: {{method: broken_d3dgs}}\n"
+                      "  good: {method: d3dgs}\n")
+    args = argparse.Namespace(preset=str(preset), ablation_seeds=None, out=tmp_path / "runs", data=motion_scene.parent,
+                              scenes=None, methods=None, report=True, studies=["main"], no_progress=True)
+    assert run_bench_cli(args) == 1
+    assert f"main/{motion_scene.name}/broken" in capsys.readouterr().err
