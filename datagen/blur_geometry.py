@@ -239,7 +239,7 @@ class BlurReport:
     view_median_px: dict[str, np.ndarray]                 # level -> [C, J] median blur of each blurred frame
 
 
-def _view_paths(local, obj, mats, c2w, K, i_center, n_max, T):
+def view_paths(local, obj, mats, c2w, K, i_center, n_max, T):
     """Tracked range [lo, hi] around i_center and the cumulative paths [hi - lo + 1, N] of one view."""
     lo, hi = max(0, i_center - n_max), min(T - 1, i_center + n_max)
     uv, _ = project_tracks(K, c2w[lo:hi + 1], track_world(local, obj, mats[lo:hi + 1]))
@@ -260,7 +260,7 @@ def choose_levels(samples: dict, mats: np.ndarray, poses: np.ndarray, K: np.ndar
         for (k, j), (local, obj) in samples.items():
             if not len(local):
                 continue
-            lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_max, T)
+            lo, cum = view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_max, T)
             first, last = candidate_windows(int(centers[j]), n_max, T, offset=lo)
             hist.add(window_path_px(cum, first, last))
         medians = hist.quantile(0.5)
@@ -303,7 +303,7 @@ def _path_statistics(samples, mats, poses, K, centers, exposures: list[int]) -> 
     for (k, j), (local, obj) in samples.items():
         if not len(local):
             continue
-        lo, cum = _view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_track, T)
+        lo, cum = view_paths(local, obj, mats, poses[k], K, int(centers[j]), n_track, T)
         c = int(centers[j]) - lo
         a, b = (c, c + 1) if c + 1 < len(cum) else (c - 1, c)
         step.append(cum[b] - cum[a])

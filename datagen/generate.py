@@ -36,6 +36,7 @@ from scene_format.config import SceneConfig
 from datagen.config import load_preset, resolve_scene
 from datagen.preview import blur_psnr, contact_sheet, speed_sheet
 from scene_format.transforms import write_transforms
+from datagen.temporal_sampling import blend_weights
 from datagen.speed import SHUTTER_LEVEL, check_interpolation, check_speeds, variant_config, variant_name
 from common.checkpoint import JobCheckpoint
 from common.config import ConfigError, dump_config
@@ -65,6 +66,9 @@ def config_fingerprint(cfg: SceneConfig) -> str:
     data.pop("formats")
     if not cfg.blur.fit:
         data["blur"].pop("fit")
+    if not cfg.render.adaptive_px:                  # every frame rendered: max_stride says nothing
+        data["render"].pop("adaptive_px")
+        data["render"].pop("max_stride")
     text = yaml.safe_dump(data, sort_keys=False)
     return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{text}".encode()).hexdigest()
 
@@ -137,6 +141,7 @@ class SceneJob:
         t_blur = time.perf_counter()
         self._measure_blur()  # before anything is written: a level out of reach leaves no output behind
         self.measure_dynamic()
+        self._plan_renders()
         t_blur = time.perf_counter() - t_blur
         self.dir.mkdir(parents=True, exist_ok=True)
         renderer = R.ViewRenderer()
@@ -152,15 +157,26 @@ class SceneJob:
         seconds[0]["blur_geometry"] += t_blur
         bar = tqdm(range(start, cfg.n_timestamps), desc=cfg.name, unit="ts", initial=start, total=cfg.n_timestamps,
                    disable=not self.progress, dynamic_ncols=True, position=self.position)
+        rendered = set(self.rendered.tolist())
+        # the rendered frame before `start` (resuming an adaptive run): the blend anchor of the frames it skips
+        anchor = (start - 1, self._render(start - 1, cams, renderer, seconds[0])) if start and len(rendered) < cfg.n_timestamps else None
+        last_ckpt = start
         try:
             for i in bar:
+                if i not in rendered:
+                    continue
                 frames = self._render(i, cams, renderer, seconds[0])
+                if anchor is not None and anchor[0] < i - 1:          # the frames skipped since the last render
+                    for job, stream, secs in zip(self.jobs, streams, seconds):
+                        job._blend_skipped(anchor, (i, frames), stream[2], secs)
                 for job, stream, secs in zip(self.jobs, streams, seconds):
                     job._consume(i, frames, *stream, secs)
+                anchor = (i, frames)
                 if self.progress and i % 10 == 0:
                     bar.set_postfix_str(" ".join(f"c{k}:{s.n_events / 1e3:.0f}k" for k, s in enumerate(spools)))
-                if (i + 1) % self.checkpoint_every == 0 and i + 1 < cfg.n_timestamps:
+                if i + 1 - last_ckpt >= self.checkpoint_every and i + 1 < cfg.n_timestamps:
                     self._checkpoint(ckpt, i + 1, streams, seconds, t_start)
+                    last_ckpt = i + 1
         finally:
             bar.close()
             renderer.close()
@@ -262,6 +278,57 @@ class SceneJob:
         seconds["simulate"] += t2 - t1
         seconds["write"] += time.perf_counter() - t2
 
+    def _blend_skipped(self, a: tuple[int, list], b: tuple[int, list], stacks, seconds: dict) -> None:
+        """The frames between rendered frames a and b ((index, frames per camera)) into the blur sums, as
+        linear-light blends of the two (datagen.temporal_sampling); the simulator sees only rendered frames."""
+        if not self.windows:
+            return
+        t0 = time.perf_counter()
+        (ia, fa), (ib, fb) = a, b
+        for m in range(ia + 1, ib):
+            w = np.float32(blend_weights(ia, ib, m))
+            for k in range(len(fa)):
+                frame = None
+                for level in self.windows:
+                    if any(first <= m <= last for first, last in self.windows[level].values()):
+                        frame = fa[k] * (1 - w) + fb[k] * w if frame is None else frame
+                        for j, mean in stacks[(level, k)].add(m, frame):
+                            write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
+        seconds["write"] += time.perf_counter() - t0
+
+    def _plan_renders(self) -> None:
+        """self.rendered: the rendered-frame indices (every one, or render.adaptive_px's schedule from
+        the scene geometry: datagen.temporal_sampling) and self.render_plan for the manifest."""
+        cfg, T = self.cfg, self.cfg.n_timestamps
+        self.rendered, self.render_plan = np.arange(T), {"adaptive_px": 0.0, "rendered_frames": T, "timestamps": T}
+        for v in self.variants:
+            v.rendered, v.render_plan = self.rendered, self.render_plan
+        if not cfg.render.adaptive_px:
+            return
+        from datagen.temporal_sampling import frame_steps_px, plan_renders
+
+        mats, samples = self._motion()
+        steps = frame_steps_px(samples, mats, self.poses, self.intr.K, self.kept, T)
+        self.rendered, self.render_plan = plan_renders(steps, self.kept, cfg.render.adaptive_px, cfg.render.max_stride)
+        for v in self.variants:                     # they show the scene's frames
+            v.rendered, v.render_plan = self.rendered, self.render_plan
+        print(f"{cfg.name}: adaptive render: {len(self.rendered)} of {T} frames (<= {cfg.render.adaptive_px:g} px "
+              f"between rendered frames, <= {cfg.render.max_stride} apart)", flush=True)
+
+    def _motion(self):
+        """(part motion, surface samples) of the scene's geometry at the kept frames (render_geometry),
+        measured once for the blur levels and the render schedule."""
+        if getattr(self, "_motion_cache", None) is None:
+            from datagen.render_geometry import RigidMotionError, sample_scene_motion
+
+            cfg = self.cfg
+            try:
+                self._motion_cache = sample_scene_motion(self.tau, self.kept, self.poses, self.intr.K, cfg.render.width,
+                                                         cfg.render.height, cfg.blur.sample_stride_px)
+            except RigidMotionError as exc:
+                raise RigidMotionError(f"scene {cfg.name}: {exc}") from None
+        return self._motion_cache
+
     @property
     def _is_variant(self) -> bool:
         return self.dir.name != self.cfg.name
@@ -272,13 +339,7 @@ class SceneJob:
         cfg = self.cfg
         if not any(job.cfg.blur.target_px or job.cfg.blur.exposure_ms for job in self.jobs):
             return
-        from datagen.render_geometry import RigidMotionError, sample_scene_motion
-
-        try:
-            mats, samples = sample_scene_motion(self.tau, self.kept, self.poses, self.intr.K, cfg.render.width,
-                                                cfg.render.height, cfg.blur.sample_stride_px)
-        except RigidMotionError as exc:
-            raise RigidMotionError(f"scene {cfg.name}: {exc}") from None
+        mats, samples = self._motion()
         jobs = [job for job in self.jobs if job.cfg.blur.target_px or job.cfg.blur.exposure_ms]
         reports = measure_blur_many(samples, mats, self.poses, self.intr.K, self.kept,
                                     [(job.cfg.blur, job.cfg.real_fps) for job in jobs], cfg.name)
@@ -378,6 +439,7 @@ class SceneJob:
             "events_per_second_per_camera": [round(n / cfg.real_duration_s) for n in n_events],
             "blur": blur,
             **self._speed_manifest(),
+            **({"render_plan": self.render_plan} if self.render_plan.get("adaptive_px") else {}),
             "seconds": {k: round(v, 3) for k, v in seconds.items()},
             "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": sha256_file(p)} for p in files},
         }

@@ -18,15 +18,25 @@ MAX_RENDER_PIXELS = 4096 * 4096
 @dataclass(frozen=True)
 class RenderConfig:
     """engine: workbench (rasteriser, noise-free; default) | cycles | eevee. samples: anti-aliasing
-    samples for workbench (1, 5, 8, 11, 16, 32), path-tracing samples for cycles, TAA samples for eevee."""
+    samples for workbench (1, 5, 8, 11, 16, 32), path-tracing samples for cycles, TAA samples for eevee.
+    adaptive_px: 0 renders every frame of the fps time line; > 0 renders only the frames the image
+    motion needs, at most adaptive_px of motion (p99 of the scene's surface points) between two rendered
+    frames and at most max_stride frames apart, the kept frames always (datagen.temporal_sampling)."""
     engine: Literal["workbench", "cycles", "eevee"] = "workbench"
     samples: int = 8
     fps: float = 3000.0
     width: int = 346
     height: int = 260
+    adaptive_px: float = 0.0
+    max_stride: int = 8
 
     def __post_init__(self):
-        check_positive(self, "samples", "fps", "width", "height")
+        check_positive(self, "samples", "fps", "width", "height", "max_stride")
+        if not 0 <= self.adaptive_px <= 10:
+            raise ConfigError(f"adaptive_px: expected 0 (every frame rendered) or a bound in (0, 10] px of image "
+                              f"motion between rendered frames, got {self.adaptive_px!r}")
+        if not self.max_stride <= 1000:
+            raise ConfigError(f"max_stride: expected at most 1000 frames between rendered frames, got {self.max_stride!r}")
         if self.width * self.height > MAX_RENDER_PIXELS:
             raise ConfigError(f"width, height: {self.width} x {self.height} is more than {MAX_RENDER_PIXELS:,} pixels "
                               "(4096 x 4096); every camera's frames and simulator state must fit in memory")

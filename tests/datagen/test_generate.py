@@ -236,9 +236,12 @@ def _same_files(a: Path, b: Path) -> list[str]:
     return differ
 
 
-def test_killed_run_resumes_to_identical_files(tmp_path):
+@pytest.mark.parametrize("render", ["", ", adaptive_px: 2.0, max_stride: 4"], ids=["every-frame", "adaptive"])
+def test_killed_run_resumes_to_identical_files(tmp_path, render):
+    """(adaptive: the resumed run renders the frame before its checkpoint again as the blend anchor of
+    the frames it skips)"""
     preset = tmp_path / "p.yaml"
-    preset.write_text(RESUME_PRESET)
+    preset.write_text(RESUME_PRESET.replace("samples: 1}", "samples: 1" + render + "}"))
     assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
     ckpt = _killed_after_first_checkpoint(preset, tmp_path / "b")
     assert ckpt.exists(), "the run ended before its first checkpoint: nothing to resume"
