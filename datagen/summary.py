@@ -1,5 +1,5 @@
 """The blur table of generated scenes, from their manifests (printed by `e4dgs dataset` and by
-`python -m benchmark.dataset_summary`)."""
+`python -m tools.dataset_summary`)."""
 from __future__ import annotations
 
 import json

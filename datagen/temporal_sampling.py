@@ -15,7 +15,7 @@ What fills the skipped frames (datagen.generate):
 - a blurred frame is the mean of every render.fps frame in its exposure: a skipped frame enters it as
   the linear-light blend of the two rendered frames around it (`blend_weights`), i.e. the exposure
   integral by the trapezoid rule over the rendered frames.
-The error against rendering every frame is measured by `python -m datagen.bench_render_rate
+The error against rendering every frame is measured by `python -m tools.bench_render_rate
 --adaptive ...` (docs/dataset.md).
 """
 from __future__ import annotations

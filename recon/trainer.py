@@ -188,10 +188,11 @@ class Trainer:
     def setup(self) -> None:
         """A fresh model, its optimizer and densification statistics (iteration 0)."""
         self.model = self._new_model()
-        self.optimizer = self._optimizer()
+        self.optimizer = self.new_optimizer()
         self.stats = DensifyStats(len(self.model), self.device)
 
-    def _optimizer(self) -> torch.optim.Adam:
+    def new_optimizer(self) -> torch.optim.Adam:
+        """An Adam over every parameter group of the model (and the method's extras), at the config's rates."""
         g, lr = self.model.gaussians, self.tcfg.lr
         groups = [
             {"params": [g.means], "lr": lr.position_init * self.extent, "name": "means"},
@@ -258,7 +259,7 @@ class Trainer:
             raise TrainingError(f"{path}: checkpoint of a different run; delete it or use another output folder")
         self.model = DynamicGaussians.from_state(state["model"], str(path)).to(self.device)
         self.method.load_state_dict(state["method"])
-        self.optimizer = self._optimizer()
+        self.optimizer = self.new_optimizer()
         self.optimizer.load_state_dict(state["optimizer"])   # moves Adam's moments to the parameters' device
         self.stats = DensifyStats(len(self.model), self.device)
         self.stats.load_state_dict(state["stats"])

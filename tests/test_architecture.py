@@ -4,7 +4,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 LAYERS = {"common": 0, "simulator": 1, "blender_scenes": 1, "scene_format": 2, "e2vid": 2, "datagen": 3,
-          "recon": 4, "benchmark": 5, "viewer": 5, "e4dgs": 6}
+          "recon": 4, "benchmark": 5, "viewer": 5, "e4dgs": 6, "tools": 7}
 
 
 def package_imports() -> dict[str, set[tuple[str, str]]]:

@@ -229,6 +229,13 @@ class Viewer:
             st.dirty = True
             st.rendered_full = False
 
+    def set_playing(self, client_id: int, playing: bool) -> None:
+        """Start or stop a tab's time playing (the Play button's state)."""
+        with self._lock:
+            st = self._tabs.get(client_id)
+            if st is not None:
+                st.playing = bool(playing)
+
     def snap(self, client_id: int, camera: int) -> None:
         """Put the tab's view on dataset camera `camera`: from the next frame on, renders use its exact
         intrinsics and its pose at the tab's time, and the view follows it as time moves."""

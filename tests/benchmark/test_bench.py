@@ -303,7 +303,7 @@ def test_bench_train_breakdown_times_every_part_inside_an_iteration():
 
     import torch
 
-    from benchmark.bench_train import PARTS, Clock, instrument
+    from tools.bench_train import PARTS, Clock, instrument
     from recon.deform import DeformationField
     from recon.gaussians import GaussianModel
     from recon.raster import Camera

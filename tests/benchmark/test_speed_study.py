@@ -133,7 +133,7 @@ def test_leaderboard_puts_every_score_next_to_its_floor_and_names_the_speeds(tmp
 
 
 def test_level_speeds_are_interpolated_in_log_speed_and_out_of_reach_is_said():
-    from benchmark.calibrate import PAPER_GARAGE_COST_DB, costs_from_rows, level_speed
+    from tools.calibrate import PAPER_GARAGE_COST_DB, costs_from_rows, level_speed
 
     costs = [(1, -0.1), (16, 0.0), (32, 0.5), (64, 2.5)]
     # 1.5 dB is half-way from 0.5 (x32) to 2.5 (x64): x32 * 2^0.5

@@ -168,7 +168,7 @@ def test_the_event_target_is_the_block_mean_of_the_counts(motion_scene, tmp_path
 
 
 def test_bench_raster_times_every_saved_state_of_a_run_at_each_factor(motion_scene, tmp_path, capsys):
-    from benchmark.bench_raster import main, training_states
+    from tools.bench_raster import main, training_states
     cfg = {**SMALL, "train.snapshots": [0.5, 1.0]}
     recon.fit(motion_scene, "d3dgs", overrides=cfg, out_dir=tmp_path / "run", progress=False)
     states = training_states([str(tmp_path / "run")])

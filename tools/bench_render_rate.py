@@ -7,7 +7,7 @@ nearest reference event of the same pixel and polarity), next to the render time
 With fast camera motion, `--rates 6000 3000 1500` checks whether 3000 FPS still resolves the
 per-pixel crossing times when the image moves several pixels per rendered frame.
 
-    python -m datagen.bench_render_rate [--scene lego] [--duration-ms 40] [--cameras 0] [--rates 6000 3000]
+    python -m tools.bench_render_rate [--scene lego] [--duration-ms 40] [--cameras 0] [--rates 6000 3000]
 """
 from __future__ import annotations
 

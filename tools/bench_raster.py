@@ -17,8 +17,8 @@ camera 0 at t = 0.5 with the deformation applied, forward + backward of the same
 backend at 1 thread, at full resolution and at the coarse-to-fine factors 2 and 4
 (recon.coarse.coarse_camera), all alternated.
 
-    python -m benchmark.bench_raster [--sizes 20000 100000] [--scenes trained early] [--repeats 7] [--torch-max 20000]
-    python -m benchmark.bench_raster --runs runs/field_curves/hinge/d3dgs_trajectory [--factors 1 2 4]
+    python -m tools.bench_raster [--sizes 20000 100000] [--scenes trained early] [--repeats 7] [--torch-max 20000]
+    python -m tools.bench_raster --runs runs/field_curves/hinge/d3dgs_trajectory [--factors 1 2 4]
 """
 from __future__ import annotations
 

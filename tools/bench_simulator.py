@@ -8,7 +8,7 @@ is configs/sim_realistic.yaml's choice); the lin-log / log frame-rate ratios are
 machine stalls hit all of them alike; the table shows medians. Time covers `EventSimulator.push`
 (validation, log response, every enabled stage, sorted EVENT_DTYPE output), not frame generation.
 
-    python -m benchmark.bench_simulator [--frames 600] [--repeats 5] [--threads 1 2]
+    python -m tools.bench_simulator [--frames 600] [--repeats 5] [--threads 1 2]
 """
 from __future__ import annotations
 
@@ -20,7 +20,6 @@ import numba
 import numpy as np
 
 from simulator import EventSimulator, SimulatorConfig
-from simulator.kernels import Workspace
 
 WIDTH, HEIGHT, FPS = 346, 260, 3000
 _EFFECTS = dict(threshold_sigma=0.03, lowpass_cutoff_hz=200.0, refractory_us=100, leak_rate_hz=0.1,
@@ -41,8 +40,7 @@ def grating_frames(n_frames: int) -> list[np.ndarray]:
 
 def run_once(config: SimulatorConfig, frames, t_us, threads: int) -> tuple[float, int]:
     numba.set_num_threads(threads)
-    sim = EventSimulator(config, WIDTH, HEIGHT, seed=0)
-    sim._emit_kwargs["workspace"] = Workspace(n_chunks=threads)
+    sim = EventSimulator(config, WIDTH, HEIGHT, seed=0, threads=threads)
     n_events = 0
     start = time.perf_counter()
     for frame, t in zip(frames, t_us):

@@ -1,6 +1,6 @@
 """Training iterations per second of every method at a scene's resolution, with a per-part breakdown.
 
-    python -m benchmark.bench_train [--scene data/quick/hinge] [--methods e4dgs e4dgs_rgb d3dgs]
+    python -m tools.bench_train [--scene data/quick/hinge] [--methods e4dgs e4dgs_rgb d3dgs]
                                     [--gaussians 20000] [--iters 12] [--threads 1] [--against REV]
                                     [--precisions auto float32 bfloat16]
 
@@ -159,7 +159,7 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str, extra: 
         events = E4DGSConfig().events
         with torch.no_grad():
             model.gaussians.prune(importance(model, ds, events.iip_times) >= events.iip_threshold)
-        trainer.optimizer = trainer._optimizer()
+        trainer.optimizer = trainer.new_optimizer()
     for group in trainer.optimizer.param_groups:
         group["lr"] = 0.0
     model.meta.deform_enabled = True

@@ -8,7 +8,7 @@ workers, which is what a user pays. The two modes alternate `--repeats` times in
 (stalls of the machine hit both alike); the table shows medians and the serial / Ray ratio, and
 checks that both modes produced the same PSNR per job.
 
-    python -m benchmark.bench_ray [--iterations 100] [--repeats 2] [--cpus 2] [--data data/tiny_motion]
+    python -m tools.bench_ray [--iterations 100] [--repeats 2] [--cpus 2] [--data data/tiny_motion]
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Learning curves of one method with the deformation MLP against per-Gaussian trajectories: PSNR and
 moving-pixel PSNR of each snapshot against training seconds.
 
-    python -m benchmark.field_curves --scene data/quick/hinge --method e4dgs \\
+    python -m tools.field_curves --scene data/quick/hinge --method e4dgs \\
         --config configs/recon/bench/e4dgs_quick.yaml [--fields mlp trajectory] [--scale 1] [--set KEY=VALUE]
 
 Each field trains the same config (`train.deform_field.kind` set, `train.iterations` x --scale with

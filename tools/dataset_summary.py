@@ -1,7 +1,7 @@
 """Summarise a generated dataset (prints tables): time per scene, events per camera, size on disk, and
 per blur level the chosen exposure, the measured blur length and the blurred-vs-sharp PSNR.
 
-    python -m benchmark.dataset_summary data/quick
+    python -m tools.dataset_summary data/quick
 """
 from __future__ import annotations
 

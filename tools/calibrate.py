@@ -1,7 +1,7 @@
 """The one calibration of the blur levels: the speeds at which D3DGS on blurred frames loses, on one
 scene, what the paper's Table 3 says it loses on garage.
 
-    python -m benchmark.calibrate runs/quick/results.jsonl --scene garage
+    python -m tools.calibrate runs/quick/results.jsonl --scene garage
 
 reads the speed study's D3DGS-on-blurred-frames rows of that scene and the main study's D3DGS on
 sharp frames, prints the cost (sharp minus blurred PSNR) at every measured speed, and the speed of

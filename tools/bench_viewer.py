@@ -9,7 +9,7 @@ camera (each frame deforms the model anew). While the view moves, a new frame is
 camera update the browser reports, so frames / s is bounded by the browser too (a headless Chromium
 renders WebGL in software) and by the render time.
 
-    python -m viewer.bench_viewer --run runs/quick/hinge/e4dgs_rgb [--gaussians 20000] [--seconds 10]
+    python -m tools.bench_viewer --run runs/quick/hinge/e4dgs_rgb [--gaussians 20000] [--seconds 10]
 """
 from __future__ import annotations
 
@@ -107,8 +107,7 @@ def main(argv=None) -> int:
         rows.append(("view comes to rest: one frame", f"{rest.image.shape[1]}x{rest.image.shape[0]}", float("nan"),
                      rest.seconds * 1e3))
         viewer.snap(cid, 0)
-        with viewer._lock:
-            viewer._tabs[cid].playing = True
+        viewer.set_playing(cid, True)
         phase("time playing (cam0 view)", lambda k: None)
     finally:
         browser.close()

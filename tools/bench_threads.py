@@ -2,7 +2,7 @@
 numba rasterizer (numba's OpenMP layer) under 1 or 2 threads, with OpenMP's default wait policy
 (idle threads spin) and with OMP_WAIT_POLICY=PASSIVE (idle threads sleep).
 
-    python -m benchmark.bench_threads [--repeats 5] [--points 1000 4096] [--gaussians 20000]
+    python -m tools.bench_threads [--repeats 5] [--points 1000 4096] [--gaussians 20000]
 
 Each setting runs in its own process (OpenMP reads its environment once, at start); settings are
 alternated within every repeat so machine stalls hit all alike; "loaded" runs one busy process per
@@ -17,6 +17,7 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 SETTINGS = [(1, None), (1, "PASSIVE"), (2, None), (2, "PASSIVE")]
 
@@ -39,7 +40,7 @@ def child(part: str, size: int, reps: int) -> None:
     else:
         import numba
 
-        from benchmark.bench_raster import SCENES, step
+        from tools.bench_raster import SCENES, step
 
         numba.set_num_threads(threads)
         params, cam, bg = SCENES["trained"](size)
@@ -62,8 +63,8 @@ def run_setting(part: str, size: int, threads: int, policy: str | None, reps: in
     env.pop("OMP_WAIT_POLICY", None)
     if policy:
         env["OMP_WAIT_POLICY"] = policy
-    out = subprocess.run([sys.executable, "-m", "benchmark.bench_threads", "--child", part, str(size), str(reps)],
-                         env=env, capture_output=True, text=True, check=True)
+    out = subprocess.run([sys.executable, "-m", "tools.bench_threads", "--child", part, str(size), str(reps)],
+                         env=env, capture_output=True, text=True, check=True, cwd=Path(__file__).resolve().parents[1])
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

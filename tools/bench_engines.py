@@ -7,7 +7,7 @@ the scene's own sensor config, and reports events per second of simulated time, 
 and for a frozen one (scene and camera held at the middle of the clip, where an ideal renderer
 gives no events at all), next to the render time per view.
 
-    python -m datagen.bench_engines [--scene cubes] [--frames 90]
+    python -m tools.bench_engines [--scene cubes] [--frames 90]
 """
 from __future__ import annotations
 

@@ -5,11 +5,11 @@ Generates each scene of a dataset preset once rendering every frame of its time 
 bound (px of image motion between rendered frames), into a temporary folder, and compares each
 adaptive scene with the fixed-rate one: frames rendered and render seconds; the events (count error,
 and each event's time to the nearest fixed-rate event of the same pixel and polarity, as
-datagen.bench_render_rate does); the sharp frames (identical: the kept frames are always rendered);
+tools.bench_render_rate does); the sharp frames (identical: the kept frames are always rendered);
 the blurred frames (PSNR of the adaptive blurred frames against the fixed-rate ones, every level).
 Speed variants are left out (they take the scene's rendered frames).
 
-    python -m datagen.bench_adaptive --preset quick --scenes hinge lego garage --bounds 0.5 1 2 [--cameras 2]
+    python -m tools.bench_adaptive --preset quick --scenes hinge lego garage --bounds 0.5 1 2 [--cameras 2]
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import yaml
 
 from common.machine import cpu_summary
 from common.imageio import read_png_linear
-from datagen.bench_render_rate import nearest_time_errors
+from tools.bench_render_rate import nearest_time_errors
 from datagen.config import PRESETS_DIR
 from simulator.h5io import read_events
 

@@ -3,7 +3,7 @@ the writing and reading libraries, whether the events came back the same (per ti
 format's resolution, x, y, polarity, count, sensor size), file size, and write / read speed in
 millions of events per second, all in one run (median of --repeats, formats alternated).
 
-    python -m benchmark.bench_formats [--events data/quick/hinge/events/cam0.h5] [--repeats 3]
+    python -m tools.bench_formats [--events data/quick/hinge/events/cam0.h5] [--repeats 3]
 """
 from __future__ import annotations
 
