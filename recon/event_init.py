@@ -15,7 +15,7 @@ import numpy as np
 
 from scene_format.reader import SceneDataset
 from recon import event_supervision as ev
-from recon import initial_points as initial
+from recon import point_clouds as initial
 from recon.event_windows import EventSource
 
 

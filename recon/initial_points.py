@@ -1,73 +1,39 @@
-"""Initial point clouds without SfM (shared by D3DGS and E-4DGS; see docs/recon.md).
-
-- objects: points uniform in an axis-aligned cube;
-- rooms: a dense-to-sparse ball: radius uniform in [0, R] (not in volume), so the point density
-  falls off as 1 / r^2 from the centre, where the scene's subject is;
-- or a given point cloud.
-"""
+"""A run's initial Gaussian centres, chosen by the training config (`train.init`): a random cube
+(objects) or sphere shell (rooms) around the rig's target as the paper does, the points of a file,
+or the cube / sphere carved by the events (recon.event_init). The generators themselves are pure
+functions in recon.point_clouds."""
 from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-
-def random_cube(n: int, half_size: float, center=(0.0, 0.0, 0.0), seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    return (rng.uniform(-half_size, half_size, size=(n, 3)) + np.asarray(center, np.float64)).astype(np.float32)
-
-
-def dense_to_sparse_sphere(n: int, radius: float = 10.0, center=(0.0, 0.0, 0.0), seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    d = rng.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    r = radius * rng.random(n)
-    return (d * r[:, None] + np.asarray(center, np.float64)).astype(np.float32)
+from scene_format.reader import SceneDataset
+from recon import point_clouds as initial
+from recon.config import TrainConfig
+from recon.event_init import carved_points
 
 
-def from_point_cloud(points, n_max: int | None = None, seed: int = 0) -> np.ndarray:
-    pts = np.asarray(points, np.float32)
-    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
-        raise ValueError(f"point cloud must be a non-empty [N, 3] array, got shape {pts.shape}")
-    if not np.all(np.isfinite(pts)):
-        raise ValueError("point cloud has non-finite coordinates")
-    if n_max is not None and len(pts) > n_max:
-        pts = pts[np.random.default_rng(seed).choice(len(pts), n_max, replace=False)]
-    return pts
-
-
-def carve(points: np.ndarray, views: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
-          min_views: int = 2) -> np.ndarray:
-    """Space carving: which points every camera that sees them agrees on.
-
-    points [M, 3] world; views: (K [3, 3], world_to_cam [4, 4] OpenCV axes, active [H, W] bool), all
-    taken at one instant. A point is kept when it projects inside the image of at least `min_views`
-    of the views (in front of the camera) and onto an active pixel in every one of them.
-    Returns keep [M] bool.
-    """
-    pts = np.asarray(points, np.float64)
-    seen = np.zeros(len(pts), np.int32)
-    missed = np.zeros(len(pts), bool)
-    for K, w2c, active in views:
-        cam = pts @ np.asarray(w2c, np.float64)[:3, :3].T + np.asarray(w2c, np.float64)[:3, 3]   # [M, 3]
-        z = cam[:, 2]
-        front = z > 1e-6
-        uv = cam[:, :2] / np.where(front, z, 1.0)[:, None] @ np.asarray(K, np.float64)[:2, :2].T + \
-            np.asarray(K, np.float64)[:2, 2]                                                       # [M, 2] px
-        h, w = active.shape
-        u, v = np.floor(uv[:, 0]).astype(np.int64), np.floor(uv[:, 1]).astype(np.int64)
-        inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-        hit = np.zeros(len(pts), bool)
-        hit[inside] = active[v[inside], u[inside]]
-        seen += inside
-        missed |= inside & ~hit
-    return (seen >= min_views) & ~missed
-
-
-def sample_kept(candidates: np.ndarray, keep: np.ndarray, n: int, jitter: float, seed: int = 0) -> np.ndarray:
-    """n points drawn from the kept candidates [M, 3] (with replacement when fewer), each moved by a
-    uniform offset in [-jitter, jitter]^3 so repeated draws do not coincide. [n, 3] float32."""
-    kept = np.asarray(candidates, np.float64)[np.asarray(keep, bool)]
-    if len(kept) == 0:
-        raise ValueError("no candidate point is kept")
-    rng = np.random.default_rng(seed)
-    idx = rng.choice(len(kept), n, replace=len(kept) < n)
-    return (kept[idx] + rng.uniform(-jitter, jitter, size=(n, 3))).astype(np.float32)
+def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
+    ic = cfg.init
+    scene = dataset.scene
+    auto = "cube" if scene.kind == "object" else "sphere"
+    kind = ic.kind if ic.kind != "auto" else auto
+    if kind == "events":
+        n = ic.n_points_object if auto == "cube" else ic.n_points_room
+        candidates = initial_points(dataset, replace(cfg, init=replace(ic, kind=auto, n_points_object=ic.carve_candidates,
+                                                                        n_points_room=ic.carve_candidates)))
+        pts, _ = carved_points(dataset, candidates, n, ic.carve_times, ic.carve_window, ic.carve_min_events,
+                               ic.carve_dilate_px, ic.seed)
+        return pts
+    if kind == "cube":
+        half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * scene.rig_radius_m
+        return initial.random_cube(ic.n_points_object, half, scene.rig_target, ic.seed)
+    if kind == "sphere":
+        radius = ic.sphere_radius if ic.sphere_radius is not None else 10.0
+        return initial.dense_to_sparse_sphere(ic.n_points_room, radius, scene.rig_target, ic.seed)
+    path = Path(ic.points_file)
+    if not path.exists():
+        raise FileNotFoundError(f"init.points_file: {path} does not exist")
+    return initial.from_point_cloud(np.load(path), seed=ic.seed)

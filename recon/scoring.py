@@ -10,6 +10,7 @@ from typing import Callable
 
 import numpy as np
 
+from common.metrics import psnr
 from scene_format.reader import SceneDataset
 from recon.model import DynamicGaussians
 from recon.dataset_views import load_frame, record_camera
@@ -38,3 +39,12 @@ class Scorer:
             pred = model.render_numpy(record_camera(self.dataset, rec), rec.time, backend)
             pairs.append((self.correct(pred, gt), gt))
         return pairs
+
+
+def evaluate_psnr(pairs) -> float:
+    """Mean over images of the per-image PSNR of (prediction, ground truth) pairs (never one PSNR of
+    the whole batch): the trainer's progress figure (the benchmark's full metrics: common.metrics)."""
+    values = [psnr(p, r) for p, r in pairs]
+    if not values:
+        raise ValueError("evaluate_psnr: no image pairs")
+    return float(np.mean(values))

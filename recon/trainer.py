@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-from dataclasses import replace
 import math
 import json
 import time
@@ -32,13 +31,12 @@ from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock
-from recon import initial_points as initial
+from recon.initial_points import initial_points
 from recon.config import TrainConfig
 from recon.deform import make_field
-from recon.event_init import carved_points
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
 from recon.device import run_placement
-from recon.evaluate import evaluate_psnr
+from recon.scoring import evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
@@ -68,30 +66,6 @@ def scene_background(dataset: SceneDataset, channels: int) -> list[float]:
     if channels == 1:
         return [float(linear_to_srgb(rec709_luma(linear)))]
     return [float(c) for c in linear_to_srgb(linear)]
-
-
-def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
-    ic = cfg.init
-    scene = dataset.scene
-    auto = "cube" if scene.kind == "object" else "sphere"
-    kind = ic.kind if ic.kind != "auto" else auto
-    if kind == "events":
-        n = ic.n_points_object if auto == "cube" else ic.n_points_room
-        candidates = initial_points(dataset, replace(cfg, init=replace(ic, kind=auto, n_points_object=ic.carve_candidates,
-                                                                        n_points_room=ic.carve_candidates)))
-        pts, _ = carved_points(dataset, candidates, n, ic.carve_times, ic.carve_window, ic.carve_min_events,
-                               ic.carve_dilate_px, ic.seed)
-        return pts
-    if kind == "cube":
-        half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * scene.rig_radius_m
-        return initial.random_cube(ic.n_points_object, half, scene.rig_target, ic.seed)
-    if kind == "sphere":
-        radius = ic.sphere_radius if ic.sphere_radius is not None else 10.0
-        return initial.dense_to_sparse_sphere(ic.n_points_room, radius, scene.rig_target, ic.seed)
-    path = Path(ic.points_file)
-    if not path.exists():
-        raise FileNotFoundError(f"init.points_file: {path} does not exist")
-    return initial.from_point_cloud(np.load(path), seed=ic.seed)
 
 
 def fingerprint(method: str, cfg: Any, dataset: SceneDataset) -> str:

@@ -48,7 +48,7 @@ def make_scene(n: int, seed: int = 0):
 
 def make_early_scene(n: int, seed: int = 0):
     from recon.gaussians import nearest_neighbour_scale
-    from recon.initial_points import random_cube
+    from recon.point_clouds import random_cube
 
     points = random_cube(n, 0.35 * 3.8, seed=seed)      # the methods' object initialisation
     means = torch.from_numpy(points)

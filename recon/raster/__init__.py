@@ -64,29 +64,52 @@ def resolve_backend(backend: str, device: torch.device | str) -> str:
     return backend
 
 
+def _render_gsplat(means, quats, scales, opacities, colors, camera, background) -> RenderOutput:
+    from recon.raster.gsplat_backend import render_gsplat
+
+    return render_gsplat(means, quats, scales, opacities, colors, camera, background)
+
+
+def _projected(project, raster):
+    """A backend from a projection and a rasterizer of the same conventions."""
+    def run(means, quats, scales, opacities, colors, camera, background) -> RenderOutput:
+        means2d, conics, depths, radii = project(means, quats, scales, camera)
+        image, alpha, depth, max_w = raster(means2d, conics, depths, radii, opacities, colors, background,
+                                            camera.width, camera.height)
+        return RenderOutput(image, alpha, depth, radii, means2d, max_w)
+    return run
+
+
+def _cpu(*args) -> RenderOutput:
+    from recon.raster.cpu import project_cpu, rasterize_cpu
+
+    return _projected(project_cpu, rasterize_cpu)(*args)
+
+
+def _torch(*args) -> RenderOutput:
+    from recon.raster.rasterize_ref import rasterize_ref
+
+    return _projected(project_ref, rasterize_ref)(*args)
+
+
+def _dense(*args) -> RenderOutput:
+    from recon.raster.rasterize_ref import rasterize_dense_ref
+
+    return _projected(project_ref, rasterize_dense_ref)(*args)
+
+
+# backend name -> render(means, quats, scales, opacities, colors, camera, background); modules load on first use
+RENDERERS = {"torch": _torch, "dense": _dense, "cpu": _cpu, "gsplat": _render_gsplat}
+assert tuple(RENDERERS) == BACKENDS
+
+
 def render(means, quats, scales, opacities, colors, camera: Camera, background, backend: str = "auto") -> RenderOutput:
     _check(means, quats, scales, opacities, colors, background)
     if camera.width < 1 or camera.height < 1:
         raise ValueError(f"render: image size must be positive, got {camera.width}x{camera.height}")
     backend = resolve_backend(backend, means.device)
     camera = camera.to(means.dtype, means.device)
-    if backend == "gsplat":
-        from recon.raster.gsplat_backend import render_gsplat
-
-        return render_gsplat(means, quats, scales, opacities, colors, camera, background)
-    if backend == "cpu":
-        from recon.raster.cpu import project_cpu, rasterize_cpu
-
-        means2d, conics, depths, radii = project_cpu(means, quats, scales, camera)
-        raster = rasterize_cpu
-    else:
-        from recon.raster.rasterize_ref import rasterize_dense_ref, rasterize_ref
-
-        means2d, conics, depths, radii = project_ref(means, quats, scales, camera)
-        raster = rasterize_ref if backend == "torch" else rasterize_dense_ref
-    image, alpha, depth, max_w = raster(means2d, conics, depths, radii, opacities, colors, background,
-                                        camera.width, camera.height)
-    return RenderOutput(image, alpha, depth, radii, means2d, max_w)
+    return RENDERERS[backend](means, quats, scales, opacities, colors, camera, background)
 
 
 def warm_up(backend: str, device: torch.device | str = "cpu", channels: int = 3, dtype=torch.float32) -> None:

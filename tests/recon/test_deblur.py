@@ -8,7 +8,7 @@ import torch
 import recon
 from scene_format.reader import SceneDataset
 from recon import event_supervision as ev
-from recon.evaluate import evaluate_psnr
+from recon.scoring import evaluate_psnr
 from recon.methods.deblur_d3dgs import lowres_l1
 from tests.conftest import generate_cubes
 

@@ -9,7 +9,7 @@ import torch
 import recon
 from common.config import ConfigError
 from scene_format.reader import SceneDataset
-from recon.evaluate import evaluate_psnr
+from recon.scoring import evaluate_psnr
 from recon.methods.e4dgs import E4DGS, E4DGSRGB
 from recon.trainer import Trainer
 from recon.dataset_views import dataset_camera

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from recon import event_supervision as ev
-from recon import initial_points as initial
+from recon import point_clouds as initial
 
 
 def test_activity_mask_ignores_isolated_events_and_grows_by_the_dilation():
@@ -83,7 +83,7 @@ def test_events_init_puts_points_where_the_scene_is(motion_scene):
 
     from scene_format.reader import SceneDataset
     from recon.config import InitConfig, TrainConfig
-    from recon.trainer import initial_points
+    from recon.initial_points import initial_points
 
     ds = SceneDataset(motion_scene)
     cube = initial_points(ds, replace(TrainConfig(), init=InitConfig(kind="cube", n_points_object=4000)))

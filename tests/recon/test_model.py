@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from recon.deform import DeformationField, positional_encoding
-from recon.initial_points import dense_to_sparse_sphere, from_point_cloud, random_cube
+from recon.point_clouds import dense_to_sparse_sphere, from_point_cloud, random_cube
 from recon.sh import C0, eval_sh, n_coeffs, rgb_to_dc, sh_to_color
 
 

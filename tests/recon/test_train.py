@@ -12,7 +12,7 @@ import torch
 import recon
 from scene_format.reader import SceneDataset
 from common.config import ConfigError
-from recon.evaluate import evaluate_psnr
+from recon.scoring import evaluate_psnr
 from recon.methods.d3dgs import D3DGS
 from recon.render import camera_from_pose
 from recon.trainer import TrainingError
@@ -197,7 +197,7 @@ def test_partial_config_keeps_the_method_defaults(tmp_path):
 
 
 def test_initial_points_follow_the_scene_kind_and_options(motion_scene, tmp_path):
-    from recon.trainer import initial_points
+    from recon.initial_points import initial_points
 
     ds = SceneDataset(motion_scene)
     rig = ds.config.camera
