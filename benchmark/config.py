@@ -179,7 +179,7 @@ class Job:
     @property
     def data_scene(self) -> str:
         """The scene folder it trains on: the scene, or its speed variant."""
-        from datagen.speed import variant_name
+        from scene_format.naming import variant_name
 
         return variant_name(self.scene, self.speed) if self.speed is not None else self.scene
 
@@ -233,7 +233,7 @@ class Job:
 def _at_speed(cfg: BenchConfig, scene: str, cell: str, speed: float | None) -> dict[str, Any]:
     """A cell's overrides on a scene, trained at `speed`: a method that sees blurred RGB takes the speed
     variant's blurred frames (its blur-level field set to the variant's `shutter` level)."""
-    from datagen.speed import SHUTTER_LEVEL
+    from scene_format.naming import SHUTTER_LEVEL
     from recon.methods import get_method
 
     key = get_method(cfg.cells[cell].method).blur_level_field

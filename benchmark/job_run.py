@@ -68,13 +68,12 @@ def data_stats(dataset: SceneDataset) -> dict:
     """What the scene folder holds, for the tables: its speed, the events per second per camera (mean
     over cameras), and for a speed variant its shutter's exposure, blur (median / p90 px) and
     blurred-vs-sharp PSNR."""
-    m = dataset.manifest
-    rates = m.get("events_per_second_per_camera") or [0]
-    out = {"speed": (m.get("speed") or {}).get("factor", 1.0), "events_per_s_per_camera": sum(rates) / len(rates)}
-    level = ((m.get("blur") or {}).get("levels") or {}).get("shutter")
+    facts = dataset.facts
+    out = {"speed": facts.speed, "events_per_s_per_camera": facts.mean_events_per_second}
+    level = facts.shutter
     if level:
-        out.update(exposure_ms=level["exposure_ms"], blur_median_px=level["median_px"], blur_p90_px=level["p90_px"],
-                   blur_psnr_db=(level.get("psnr_vs_sharp_db") or {}).get("median_db"))
+        out.update(exposure_ms=level.exposure_ms, blur_median_px=level.median_px, blur_p90_px=level.p90_px,
+                   blur_psnr_db=level.psnr_vs_sharp_db)
     return out
 
 

@@ -28,7 +28,7 @@ from common.fileio import write_text_atomic
 def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callable[[str], None], ray=None) -> None:
     """Generate the scenes of dataset preset `dataset` that data_root lacks (skips complete ones).
     `scenes` may name speed variants (garage_x4): their scene is generated, which writes them."""
-    from datagen.speed import split_variant
+    from scene_format.naming import split_variant
 
     missing = sorted({split_variant(s)[0] for s in scenes if not (data_root / s / "manifest.json").exists()})
     if not missing:

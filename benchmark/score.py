@@ -180,7 +180,7 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
     from benchmark.job_run import DYN_KEYS, data_stats, versions
     from common.metrics.image import score_pairs
     from common.provenance import git_commit
-    from datagen.speed import split_variant
+    from scene_format.naming import split_variant
 
     if inputs not in INPUTS:
         raise RenderError(f"--inputs: expected one of {', '.join(INPUTS)}, got {inputs!r}")

@@ -50,7 +50,7 @@ def test_views(dataset: SceneDataset) -> dict:
             "transform_matrix": opencv_to_blender(c2w).tolist(),
             "ground_truth": {"rgb": str(rec.path.relative_to(dataset.dir)),
                              "gray": str(rec.gray_path.relative_to(dataset.dir)) if rec.gray_path else None}})
-    speed = (dataset.manifest.get("speed") or {}).get("factor", 1.0)
+    speed = dataset.facts.speed
     return {"format": FORMAT, "scene": dataset.dir.name, "speed": speed, "duration_us": dataset.duration_us,
             "width": intr.width, "height": intr.height, "intrinsics": intrinsics,
             "K": intr.K.tolist(), "convention": CONVENTION, "renders": RENDERS,

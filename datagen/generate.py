@@ -37,7 +37,8 @@ from datagen.config import load_preset, resolve_scene
 from datagen.preview import blur_psnr, contact_sheet, speed_sheet
 from scene_format.transforms import write_transforms
 from datagen.temporal_sampling import blend_weights
-from datagen.speed import SHUTTER_LEVEL, check_interpolation, check_speeds, variant_config, variant_name
+from datagen.speed import check_interpolation, check_speeds, variant_config
+from scene_format.naming import SHUTTER_LEVEL, variant_name
 from common.checkpoint import JobCheckpoint
 from common.config import ConfigError, dump_config
 from common.argtypes import positive_int

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from datagen.speed import split_variant
+from scene_format.naming import split_variant
 
 
 def blur_table(root: Path, scenes: list[str] | None = None) -> str:

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from scene_format.cameras import CameraTrajectory, load_cameras
+from scene_format.manifest import SceneManifest
 from scene_format.config import SceneConfig, read_scene_config
 
 
@@ -90,6 +91,11 @@ class SceneDataset:
     @property
     def n_cameras(self) -> int:
         return len(self.cameras)
+
+    @property
+    def facts(self) -> SceneManifest:
+        """The manifest as typed facts (speed, events, blur levels, masks): scene_format.manifest."""
+        return SceneManifest.from_dict(self.manifest, self.dir)
 
     def _read_transforms(self, path: Path, blur: dict | None = None) -> list[FrameRecord]:
         if not path.exists():

@@ -63,7 +63,7 @@ class ScenePanels:
         self.sharp = _by_camera(dataset.frames("train") + dataset.frames("test"), n)
         self.levels = dataset.blur_levels()
         self.blurred = {lv: _by_camera(dataset.blurred_frames(lv), n) for lv in self.levels}
-        self.blur_figures = dataset.manifest.get("blur", {}).get("levels", {})
+        self.blur_figures = dataset.facts.blur          # level -> BlurLevelFacts
         self._events: dict[int, EventFile] = {}
 
     def sharp_frame(self, camera: int, t_us: int) -> FrameRecord | None:
@@ -91,12 +91,13 @@ class ScenePanels:
             b = nearest(self.blurred[lv][camera], t_us)
             if b is None:
                 continue
-            fig = self.blur_figures.get(lv, {})
-            per_cam = fig.get("per_camera", [])
-            px = per_cam[camera]["median_px"] if camera < len(per_cam) else fig.get("median_px", float("nan"))
+            fig = self.blur_figures.get(lv)
+            per_cam = fig.per_camera_median_px if fig else ()
+            px = per_cam[camera] if camera < len(per_cam) else (fig.median_px if fig else None)
+            px = float("nan") if px is None else px
             span = (f"exposure {b.exposure_us[0] / 1000:.2f}-{b.exposure_us[1] / 1000:.2f} ms"
                     if b.exposure_us else "")
-            panels.append(Panel(f"blur {lv}: {span} ({fig.get('exposure_ms', float('nan')):.2f} ms), "
+            panels.append(Panel(f"blur {lv}: {span} ({fig.exposure_ms if fig else float('nan'):.2f} ms), "
                                 f"measured {px:.1f} px (median, this camera)",
                                 to_uint8_rgb(self.dataset.load_image(b.path))))
         t1 = int(t_us)

@@ -11,8 +11,8 @@ import pytest
 
 from common.config import ConfigError
 from datagen.config import resolve_scene
-from datagen.speed import (check_interpolation, check_speeds, shutter_frames, split_variant, variant_config,
-                           variant_name)
+from datagen.speed import check_interpolation, check_speeds, shutter_frames, variant_config
+from scene_format.naming import split_variant, variant_name
 from simulator.h5io import read_events
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,0 +1,66 @@
+"""A generated scene folder's manifest.json as typed facts: what the benchmark, the test views and the
+viewer read of it (its speed, events, blur levels and masks), so no reader walks the raw JSON with
+`.get` chains. The manifest itself is written by datagen.generate; `SceneDataset.facts` is this view
+of it (scene_format.reader)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from scene_format.naming import SHUTTER_LEVEL
+
+
+@dataclass(frozen=True)
+class BlurLevelFacts:
+    """One blur level as measured: its exposure (rendered frames, real-time ms), the blur length (px:
+    median and p90 over every camera, and per camera) and the blurred frames' PSNR against the sharp
+    ones (median over frames, dB; None where not measured)."""
+    name: str
+    n_frames: int
+    exposure_ms: float
+    median_px: float | None
+    p90_px: float | None
+    per_camera_median_px: tuple[float | None, ...] = ()
+    target_px: float | None = None
+    psnr_vs_sharp_db: float | None = None
+
+    @classmethod
+    def from_dict(cls, name: str, d: dict[str, Any]) -> "BlurLevelFacts":
+        return cls(name, int(d["n_frames"]), float(d["exposure_ms"]), d.get("median_px"), d.get("p90_px"),
+                   tuple(c.get("median_px") for c in d.get("per_camera", [])), d.get("target_px"),
+                   (d.get("psnr_vs_sharp_db") or {}).get("median_db"))
+
+
+@dataclass(frozen=True)
+class SceneManifest:
+    """speed: the folder's time compression (1.0 for a scene; its factor for a speed variant);
+    events_per_second_per_camera: one figure per camera; blur: level name -> its facts, in the
+    manifest's order; has_masks: the folder holds dynamic-region masks (generated with them, or added
+    by `e4dgs masks`)."""
+    scene: str
+    speed: float
+    events_per_camera: tuple[int, ...]
+    events_per_second_per_camera: tuple[float, ...]
+    blur: dict[str, BlurLevelFacts] = field(default_factory=dict)
+    has_masks: bool = False
+
+    @classmethod
+    def from_dict(cls, m: dict[str, Any], scene_dir: Path) -> "SceneManifest":
+        levels = (m.get("blur") or {}).get("levels") or {}
+        return cls(scene=m.get("scene", scene_dir.name), speed=float((m.get("speed") or {}).get("factor", 1.0)),
+                   events_per_camera=tuple((m.get("counts") or {}).get("events_per_camera") or ()),
+                   events_per_second_per_camera=tuple(m.get("events_per_second_per_camera") or ()),
+                   blur={name: BlurLevelFacts.from_dict(name, d) for name, d in levels.items()},
+                   has_masks=(scene_dir / "dynamic" / "masks.json").exists())
+
+    @property
+    def shutter(self) -> BlurLevelFacts | None:
+        """A speed variant's fixed shutter (its one blur level); None for a scene."""
+        return self.blur.get(SHUTTER_LEVEL)
+
+    @property
+    def mean_events_per_second(self) -> float:
+        """Events per second per camera, the mean over cameras (0 where none were counted)."""
+        rates = self.events_per_second_per_camera or (0,)
+        return sum(rates) / len(rates)
