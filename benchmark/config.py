@@ -7,6 +7,7 @@ YAML files in configs/bench/ (`--preset quick` -> configs/bench/quick.yaml) load
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import dataclass, field
@@ -188,7 +189,7 @@ class Job:
         seed = f"seed{self.seed}" if self.seed is not None else ""
         return "/".join(p for p in (self.study, self.dataset, self.scene, self.cell, self.variant, seed) if p)
 
-    @property
+    @functools.cached_property
     def folder(self) -> str:
         """Its training folder under the results root, '<scene>/<method>-<config hash>' (shared by jobs
         that train the same thing)."""
@@ -220,6 +221,12 @@ class Job:
         return method.input_digests(cfg)
 
     def config_hash(self) -> str:
+        """The digest of what it trains (method, config file, overrides, speed, dataset and the method's
+        other input files), computed once per job."""
+        return self._config_hash
+
+    @functools.cached_property
+    def _config_hash(self) -> str:
         payload = {"method": self.method, "overrides": self.overrides,
                    "config": (REPO / self.config).read_text() if self.config else ""}
         if self.speed is not None:      # another scene folder: another model

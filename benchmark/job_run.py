@@ -26,14 +26,14 @@ def job_data_dir(job: Job, data_root: Path) -> Path:
     return (data_root.parent / job.dataset if job.dataset else data_root) / job.data_scene
 
 
-def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placement=None) -> dict:
+def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placement=None, method_cfg=None) -> dict:
     """Scores of `model` on the scene's test views through `recon.evaluate`, rendered on the run's
     (device, backend) (default: CPU, auto), over the whole images and, where the scene has dynamic
-    masks, over the moving pixels (`*_dyn`)."""
+    masks, over the moving pixels (`*_dyn`); `method_cfg`: the run's config, already resolved."""
     from recon.api import evaluate
 
     device, backend = placement or ("cpu", "auto")
-    return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device)
+    return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device, config=method_cfg)
 
 
 DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
@@ -96,16 +96,15 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     from recon.model import load
 
     method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
-    scene_dir = job_data_dir(job, data_root)
-    result = fit(scene_dir, job.method, method_cfg, out_root / job.folder, progress=progress, keep_initial=True)
+    dataset = SceneDataset(job_data_dir(job, data_root))       # opened once: training and every score below
+    result = fit(dataset, job.method, method_cfg, out_root / job.folder, progress=progress, keep_initial=True)
     model, placement = result.model, (result.device, result.backend)       # score where it trained
-    dataset = SceneDataset(scene_dir)        # opened once for every score below
     t1 = time.time()
     lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
-    final = evaluate_model(model, dataset, lpips_net, placement)
+    final = evaluate_model(model, dataset, lpips_net, placement, method_cfg)
     # the floor: what the method's own starting model scores after the same correction (an events-only
     # score means something about events only as far as it rises above this)
-    floor = evaluate_model(result.initial, dataset, None, placement)
+    floor = evaluate_model(result.initial, dataset, None, placement, method_cfg)
     snapshots = []
     for row in result.log:
         if "snapshot" not in row:
@@ -115,7 +114,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         elif not scores_snapshots(job):      # the tables plot the main study's curves only: the others keep
             continue                         # their training log's test PSNR (log.jsonl), not re-rendered
         else:
-            s = evaluate_model(load(result.run_dir / row["snapshot"]), dataset, None, placement)
+            s = evaluate_model(load(result.run_dir / row["snapshot"]), dataset, None, placement, method_cfg)
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
     return {

@@ -83,15 +83,18 @@ class TrainResult:
         return (evals[-1]["test_psnr"], evals[-1].get("test_psnr_on", "rgb")) if evals else None
 
 
-def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_dir: str | Path | None = None,
+def fit(scene_dir: str | Path | SceneDataset, method: str = "d3dgs", config: Any = None, out_dir: str | Path | None = None,
         overrides: Mapping[str, Any] | None = None, progress: bool = True,
         on_iteration: Callable | None = None, keep_initial: bool = False) -> TrainResult:
-    """Train `method` on the scene at `scene_dir`; resumes a killed run in `out_dir`, and returns the
-    finished run as it is if `out_dir` already holds it. out_dir defaults to runs/<scene>/<method>.
-    `keep_initial` also returns the untrained model the run starts from (the benchmark's floor)."""
+    """Train `method` on the scene at `scene_dir` (a folder, or one already opened); resumes a killed
+    run in `out_dir`, and returns the finished run as it is if `out_dir` already holds it. out_dir
+    defaults to runs/<scene>/<method>. `config` is None (defaults), a YAML path, a mapping or the
+    method's typed config (used as it is when no overrides come with it). `keep_initial` also returns
+    the untrained model the run starts from (the benchmark's floor)."""
     t0 = time.time()
-    dataset = SceneDataset(scene_dir)
-    cfg = resolve_config(method, config, overrides)
+    dataset = scene_dir if isinstance(scene_dir, SceneDataset) else SceneDataset(scene_dir)
+    typed = isinstance(config, get_method(method).config_cls) and not overrides
+    cfg = config if typed else resolve_config(method, config, overrides)
     out = Path(out_dir) if out_dir is not None else Path("runs") / dataset.dir.name / method
     inside = output_inside_input(out, {"the scene folder": dataset.dir})
     if inside:
@@ -102,20 +105,23 @@ def fit(scene_dir: str | Path, method: str = "d3dgs", config: Any = None, out_di
     trainer = Trainer(get_method(method)(dataset, cfg), out, progress, on_iteration)
     initial = trainer.initial_model() if keep_initial else None
     model = trainer.run()
-    log = tuple(json.loads(line) for line in (out / "log.jsonl").read_text().splitlines())
+    # the trainer's own log (kept across resumes); a finished run returned as it is has only its file
+    log = tuple(trainer.log) if trainer.log else tuple(json.loads(line) for line in (out / "log.jsonl").read_text().splitlines())
     return TrainResult(model=model, run_dir=out, fingerprint=trainer.fingerprint, log=log,
                        device=str(trainer.device), backend=trainer.backend,
                        train_s=float(log[-1]["wall_s"]) if log else 0.0, elapsed_s=time.time() - t0, initial=initial)
 
 
 def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, split: str = "test",
-             lpips_net: str | None = None, backend: str = "auto", device: str | None = None, dynamic: bool = True) -> dict:
+             lpips_net: str | None = None, backend: str = "auto", device: str | None = None, dynamic: bool = True,
+             config: Any = None) -> dict:
     """Scores of a trained model on a scene's held-out views, the way the benchmark scores them: the
     model's own method and config (stored in it) pick the channels and the correction (E-4DGS's
     log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net); where the
     scene has dynamic-region masks (and `dynamic`), the same over the moving pixels (`*_dyn`).
     `scene_dir` is a scene folder or one already opened. Rendered on `device` (default: where the model
-    is) with `backend`."""
+    is) with `backend`. `config`: the model's method config already resolved (default: resolved from
+    the model's own)."""
     from common.metrics.image import score_pairs
 
     dataset = scene_dir if isinstance(scene_dir, SceneDataset) else SceneDataset(scene_dir)
@@ -123,7 +129,7 @@ def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, spli
         raise ValueError(f"{dataset.dir}: the model was trained on scene {model.meta.scene!r}, these are the views of "
                          f"{dataset.scene.name!r}; its scores would compare two different scenes")
     method = get_method(model.meta.method)
-    cfg = resolve_config(model.meta.method, model.meta.config or None)
+    cfg = config if config is not None else resolve_config(model.meta.method, model.meta.config or None)
     records = dataset.frames(split)
     masks = [dataset.dynamic_mask(r) for r in records] if dynamic else []
     if device is not None:

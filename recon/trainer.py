@@ -72,7 +72,7 @@ def fingerprint(method: str, cfg: Any, dataset: SceneDataset) -> str:
     h = hashlib.sha256()
     h.update(method.encode())
     h.update(dump_config(cfg).encode())
-    h.update((dataset.dir / "manifest.json").read_bytes())
+    h.update(dataset.manifest_bytes)
     return h.hexdigest()[:16]
 
 

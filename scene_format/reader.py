@@ -63,10 +63,11 @@ class FrameRecord:
         return f"cam{self.camera}/{self.index:05d}"
 
 
-def read_json(path: Path):
-    """A dataset's JSON file; a missing or malformed one is a DatasetError naming it."""
+def read_json(path: Path, raw: bytes | None = None):
+    """A dataset's JSON file (or its bytes `raw`, already read); a missing or malformed one is a
+    DatasetError naming it."""
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text() if raw is None else raw)
     except FileNotFoundError:
         raise DatasetError(f"{path}: missing (the scene is incomplete; `e4dgs check` lists what differs)") from None
     except (OSError, ValueError) as exc:
@@ -81,7 +82,8 @@ class SceneDataset:
         if not (self.dir / "manifest.json").exists():
             raise DatasetError(f"{self.dir}: no manifest.json: not a generated scene, or its generation has not "
                                "finished (run `e4dgs dataset` again to resume it)")
-        self.manifest = read_json(self.dir / "manifest.json")
+        self.manifest_bytes = (self.dir / "manifest.json").read_bytes()    # read once: its digest is a run's input
+        self.manifest = read_json(self.dir / "manifest.json", self.manifest_bytes)
         self.config: SceneConfig = read_scene_config(self.dir / "scene.yaml")
         self.scene = SceneDescription.of(self.config)
         self.cameras: list[CameraTrajectory] = load_cameras(self.dir / "cameras.json")
