@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Callable, Protocol
 
 from benchmark.config import REPO, BenchConfig, Job
+from benchmark.rows import ResultRow
 from common import provenance
 from common.machine import cpu_summary
 from common.provenance import git_commit
@@ -34,9 +35,6 @@ def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placemen
 
     device, backend = placement or ("cpu", "auto")
     return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device, config=method_cfg)
-
-
-DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
 
 
 def has_masks(job: Job, data_root: Path) -> bool:
@@ -117,18 +115,12 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
             s = evaluate_model(load(result.run_dir / row["snapshot"]), dataset, None, placement, method_cfg)
             scores = {k: s[k] for k in cfg.snapshot_metrics if k in s}
         snapshots.append({"iteration": row["iteration"], "wall_s": row["wall_s"], **scores})
-    return {
-        **job.identity(), **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
-        **{k: final[k] for k in DYN_KEYS if k in final},
-        "floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"],
-        **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {}),
-        "data": data_stats(dataset), "n_test_images": final["n_images"],
-        "iterations": result.iterations, "n_gaussians": len(model), "channels": model.meta.channels,
-        "device": result.device, "backend": result.backend, "precision": model.meta.precision, "cpu": cpu_summary(),
-        "wall_s": result.train_s, "train_elapsed_s": round(result.elapsed_s, 1),
-        "eval_s": round(time.time() - t1, 1), "snapshots": snapshots,
-        "versions": versions(), "git_commit": git_commit(), "lpips_net": lpips_net,
-    }
+    return ResultRow.of(
+        job.identity(), final, floor, data=data_stats(dataset), iterations=result.iterations, n_gaussians=len(model),
+        channels=model.meta.channels, device=result.device, backend=result.backend, precision=model.meta.precision,
+        cpu=cpu_summary(), wall_s=result.train_s, train_elapsed_s=round(result.elapsed_s, 1),
+        eval_s=round(time.time() - t1, 1), snapshots=snapshots, versions=versions(), git_commit=git_commit(),
+        lpips_net=lpips_net).to_dict()
 
 
 def reused_row(job: Job, row: dict) -> dict:

@@ -2,33 +2,127 @@
 and written, and what the tables read from a row beyond its scores: its cell's label, what its method
 sees (`inputs`: "rgb", "events"), and the order of the cells (the preset's first, then outside methods).
 
-A row is a mapping, not a class, so that rows written by older versions and by `e4dgs score` for
-outside methods keep every field they carry; its known fields are typed here (ROW_TYPES) and a row
-whose field has the wrong type is refused naming the file, the line and the field.
+A row is stored as a mapping (rows written by older versions and by `e4dgs score` for outside
+methods keep every field they carry), built through one typed class, `ResultRow`, which both the
+bench (benchmark.job_run) and `e4dgs score` (benchmark.score) fill: its fields are the known columns,
+and their JSON types (ROW_TYPES), checked where rows are read and written, are derived from it, so a
+new column is one edit. A row whose field has the wrong type is refused naming the file, the line
+and the field.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import types
+import typing
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from common.fileio import write_text_atomic
 
 NUMBER = (int, float)
 OPTIONAL_NUMBER = (int, float, type(None))
-# field -> the JSON types it may hold; every row has the identity fields, a row not failed the scores
-ROW_TYPES: dict[str, tuple[type, ...]] = {
-    "key": (str,), "study": (str,), "scene": (str,), "cell": (str,), "method": (str,), "label": (str,),
-    "variant": (str,), "dataset": (str,), "data_scene": (str,), "run_dir": (str,), "config_hash": (str,),
-    "status": (str,), "error": (str,), "device": (str,), "backend": (str,), "precision": (str,), "cpu": (str,), "inputs": (list,), "overrides": (dict,), "data": (dict,),
-    "seed": (int, type(None)), "speed": OPTIONAL_NUMBER,
-    "psnr": NUMBER, "ssim": NUMBER, "psnr_luma": OPTIONAL_NUMBER, "lpips": OPTIONAL_NUMBER,
-    "floor_psnr": OPTIONAL_NUMBER, "floor_psnr_luma": OPTIONAL_NUMBER, "floor_psnr_dyn": OPTIONAL_NUMBER,
-    "psnr_dyn": OPTIONAL_NUMBER, "psnr_luma_dyn": OPTIONAL_NUMBER, "ssim_dyn": OPTIONAL_NUMBER,
-    "lpips_dyn": OPTIONAL_NUMBER, "dyn_fraction": OPTIONAL_NUMBER, "n_dyn_images": (int,),
-    "iterations": (int, type(None)), "n_gaussians": (int, type(None)), "n_test_images": (int,), "channels": (int, type(None)),
-    "wall_s": OPTIONAL_NUMBER, "train_elapsed_s": OPTIONAL_NUMBER, "eval_s": OPTIONAL_NUMBER, "snapshots": (list,),
-}
+
+
+class _Absent:
+    """The value of a column a row does not have (left out of the stored row; null is a value)."""
+    def __repr__(self) -> str:
+        return "ABSENT"
+
+
+ABSENT: Any = _Absent()
+
+
+@dataclass
+class ResultRow:
+    """One results row. Identity (which job), then scores (test views; `*_dyn` over the moving pixels,
+    present where the scene has masks), the untrained floor, the data, the run, provenance."""
+    key: str
+    study: str
+    scene: str
+    cell: str
+    method: str
+    label: str
+    inputs: list
+    variant: str
+    seed: int | None
+    config: str
+    overrides: dict
+    speed: float | None
+    data_scene: str
+    dataset: str
+    config_hash: str
+    run_dir: str
+    psnr: float
+    ssim: float
+    psnr_luma: float | None
+    lpips: float | None
+    floor_psnr: float | None
+    floor_psnr_luma: float | None
+    data: dict
+    n_test_images: int
+    iterations: int | None
+    n_gaussians: int | None
+    channels: int | None
+    device: str
+    backend: str
+    precision: str
+    wall_s: float | None
+    train_elapsed_s: float | None
+    eval_s: float | None
+    snapshots: list
+    versions: dict
+    git_commit: str | None
+    lpips_net: str | None
+    psnr_dyn: float | None = ABSENT
+    psnr_luma_dyn: float | None = ABSENT
+    ssim_dyn: float | None = ABSENT
+    lpips_dyn: float | None = ABSENT
+    dyn_fraction: float | None = ABSENT
+    n_dyn_images: int = ABSENT
+    floor_psnr_dyn: float | None = ABSENT
+    cpu: str = ABSENT                 # the bench's runs: the CPU they trained on
+    external: bool = ABSENT           # `e4dgs score`: an outside method's renders
+    scored_unix: int = ABSENT
+    scored_as: str = ABSENT           # a reused row: the key of the row it was scored as
+    status: str = ABSENT              # "failed" (with `error`)
+    error: str = ABSENT
+
+    def to_dict(self) -> dict[str, Any]:
+        """The row as stored: every column it has (ABSENT ones left out)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if getattr(self, f.name) is not ABSENT}
+
+    @classmethod
+    def of(cls, identity: dict[str, Any], final: dict[str, Any], floor: dict[str, Any] | None, **columns) -> "ResultRow":
+        """A scored row: the job's identity, the test views' scores `final` (common.metrics.image.score_pairs:
+        psnr, psnr_luma, ssim, lpips, the `*_dyn` scores where masked, n_images), the untrained model's
+        `floor` scores (None: no floor) and the other columns by name."""
+        scores = {k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")}
+        dyn = {k: final[k] for k in DYN_KEYS if k in final}
+        floors = ({"floor_psnr": floor["psnr"], "floor_psnr_luma": floor["psnr_luma"],
+                   **({"floor_psnr_dyn": floor["psnr_dyn"]} if "psnr_dyn" in floor else {})}
+                  if floor is not None else {"floor_psnr": None, "floor_psnr_luma": None})
+        return cls(**identity, **scores, **dyn, **floors, n_test_images=final["n_images"], **columns)
+
+
+DYN_KEYS = ("psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn", "dyn_fraction", "n_dyn_images")
+
+
+def _json_types(annotation) -> tuple[type, ...]:
+    """The JSON types a column of this annotation may hold (a float column also takes an integer)."""
+    args = typing.get_args(annotation) if isinstance(annotation, types.UnionType) else (annotation,)
+    out = []
+    for a in args:
+        out += [int, float] if a is float else [a]
+    return tuple(dict.fromkeys(out))
+
+
+# column -> the JSON types it may hold, derived from ResultRow; every row has the identity columns,
+# a row not failed the scores
+ROW_TYPES: dict[str, tuple[type, ...]] = {name: _json_types(t) for name, t in
+                                          typing.get_type_hints(ResultRow).items()}
 IDENTITY = ("key", "study", "scene", "cell")
 SCORES = ("psnr", "ssim")
 SNAPSHOT_TYPES = {"iteration": NUMBER, "wall_s": NUMBER, "psnr": NUMBER, "ssim": NUMBER, "lpips": OPTIONAL_NUMBER}

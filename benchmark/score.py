@@ -177,7 +177,8 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
                   log=print) -> list[dict]:
     """Results rows of an outside method's renders, one per scene folder under `renders`. Every file
     is checked before anything is scored (RenderError names the first bad one)."""
-    from benchmark.job_run import DYN_KEYS, data_stats, versions
+    from benchmark.job_run import data_stats, versions
+    from benchmark.rows import ResultRow
     from common.metrics.image import score_pairs
     from common.provenance import git_commit
     from scene_format.naming import split_variant
@@ -213,17 +214,15 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
             snapshots.append({"wall_s": seconds, **{k: s[k] for k in snapshot_metrics if k in s}})
         if train_seconds is not None and not any(abs(p["wall_s"] - train_seconds) < 1e-9 for p in snapshots):
             snapshots.append({"wall_s": train_seconds, **{k: final[k] for k in ("psnr", "ssim", "lpips") if k in final}})
-        rows.append({
-            "key": f"main/{scene}/{name}", "study": "main", "scene": scene, "cell": name, "variant": "", "seed": None,
-            "method": name, "label": label or name, "inputs": list(seen), "external": True,
-            "config": "", "overrides": {}, "speed": speed, "data_scene": ds.dir.name, "dataset": "",
-            "config_hash": _digest(sorted(files.values())), "run_dir": str(folder),
-            **{k: final.get(k) for k in ("psnr", "psnr_luma", "ssim", "lpips")},
-            **{k: final[k] for k in DYN_KEYS if k in final}, "floor_psnr": None, "floor_psnr_luma": None, "data": data_stats(ds), "n_test_images": final["n_images"],
-            "iterations": None, "n_gaussians": None, "channels": channels, "device": "", "backend": "", "precision": "",
-            "wall_s": train_seconds, "train_elapsed_s": None, "eval_s": round(time.time() - t0, 1),
-            "snapshots": sorted(snapshots, key=lambda p: p["wall_s"]), "versions": versions(),
-            "git_commit": git_commit(), "lpips_net": lpips_net, "scored_unix": int(time.time())})
+        identity = {"key": f"main/{scene}/{name}", "study": "main", "scene": scene, "cell": name, "variant": "",
+                    "seed": None, "method": name, "label": label or name, "inputs": list(seen), "config": "",
+                    "overrides": {}, "speed": speed, "data_scene": ds.dir.name, "dataset": "",
+                    "config_hash": _digest(sorted(files.values())), "run_dir": str(folder)}
+        rows.append(ResultRow.of(
+            identity, final, None, external=True, data=data_stats(ds), iterations=None, n_gaussians=None,
+            channels=channels, device="", backend="", precision="", wall_s=train_seconds, train_elapsed_s=None,
+            eval_s=round(time.time() - t0, 1), snapshots=sorted(snapshots, key=lambda p: p["wall_s"]),
+            versions=versions(), git_commit=git_commit(), lpips_net=lpips_net, scored_unix=int(time.time())).to_dict())
         log(f"score: {name} on {ds.dir.name}: PSNR {final['psnr']:.2f} SSIM {final['ssim']:.3f}"
             + (f" LPIPS {final['lpips']:.3f}" if final.get("lpips") is not None else ""))
     return rows
