@@ -49,6 +49,12 @@ def test_preset_overrides_are_merged_into_the_scene():
     ("name: x\nkind: object\ncamera: {shake: {min_hz: 30, max_hz: 10}}\n", "camera.shake.max_hz"),
     ("name: x\nkind: object\nsensor: {pos_threshold: 0}\n", "sensor.pos_threshold"),
     ("name: x\nkind: object\nrender: {engine: workbench, samples: 7}\n", "render.samples"),
+    ("name: x\nkind: object\nrender: {adaptive_px: -1}\n", "render.adaptive_px: expected 0"),
+    ("name: x\nkind: object\nrender: {adaptive_px: 50}\n", "render.adaptive_px: expected 0"),
+    ("name: x\nkind: object\nrender: {max_stride: 0}\n", "render.max_stride"),
+    ("name: x\nkind: object\nformats: [aedat4, aedat4]\n", "formats: a format is named twice"),
+    ("name: x\nkind: object\nformats: [h5]\n", "formats: 'h5' is not an extra event format"),
+    ("name: x\nkind: object\nblur: {fit: maybe}\n", "blur.fit"),
 ])
 def test_bad_scene_yaml_names_file_and_key(tmp_path, text, words):
     p = tmp_path / "scene.yaml"
