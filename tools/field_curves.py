@@ -8,7 +8,7 @@ Each field trains the same config (`train.deform_field.kind` set, `train.iterati
 the schedule scaled along, snapshots at 10 / 25 / 50 / 75 / 100 %) into --out/<method>_<field>; the
 runs resume and are reused like any training folder. Every snapshot is scored as the benchmark
 scores (recon.evaluate: the method's correction, whole images and the scene's dynamic masks).
-Writes curves.json and prints a Markdown table with the CPU named.
+Writes <out>/<scene>/<method>_curves.json and prints a Markdown table with the CPU named.
 """
 from __future__ import annotations
 
