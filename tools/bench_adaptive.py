@@ -86,6 +86,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
     args = ap.parse_args(argv)
     preset = Path(args.preset) if args.preset.endswith((".yaml", ".yml")) else PRESETS_DIR / f"dataset_{args.preset}.yaml"
+    if not preset.is_file():
+        raise SystemExit(f"error: --preset: no dataset preset {args.preset!r} ({preset} does not exist)")
     base = {"camera": {"n_cameras": args.cameras}} if args.cameras else {}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
