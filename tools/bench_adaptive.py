@@ -92,6 +92,7 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         root = args.out or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
         for scene in args.scenes:
             ref = generate(preset, scene, base, root / f"{scene}_fixed")
             C = ref["counts"]["cameras"]
