@@ -39,7 +39,8 @@ def generate(preset: Path, scene: str, extra: dict, out: Path) -> dict:
     over = data.setdefault("overrides", {})
     for key, value in extra.items():
         over[key] = {**over.get(key, {}), **value} if isinstance(value, dict) else value
-    for s in (data.get("scene_overrides") or {}).values():
+    data["scene_overrides"] = {k: v for k, v in (data.get("scene_overrides") or {}).items() if k == scene}
+    for s in data["scene_overrides"].values():
         s.pop("speeds", None)
     p = out.with_suffix(".yaml")
     p.write_text(yaml.safe_dump(data))
