@@ -84,9 +84,9 @@ class ResultRow:
     n_dyn_images: int = ABSENT
     floor_psnr_dyn: float | None = ABSENT
     cpu: str = ABSENT                 # the bench's runs: the CPU they trained on
-    external: bool = ABSENT           # `e4dgs score`: an outside method's renders
-    scored_unix: int = ABSENT
-    scored_as: str = ABSENT           # a reused row: the key of the row it was scored as
+    external: bool | None = ABSENT           # `e4dgs score`: an outside method's renders
+    scored_unix: int | None = ABSENT
+    scored_as: str | None = ABSENT           # a reused row: the key of the row it was scored as
     status: str = ABSENT              # "failed" (with `error`)
     error: str = ABSENT
 
