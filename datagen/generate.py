@@ -287,32 +287,33 @@ class SceneJob:
         t0 = time.perf_counter()
         (ia, fa), (ib, fb) = a, b
         for m in range(ia + 1, ib):
+            levels = [lv for lv, wins in self.windows.items() if any(first <= m <= last for first, last in wins.values())]
+            if not levels:                       # in no exposure: nothing to blend
+                continue
             w = np.float32(blend_weights(ia, ib, m))
             for k in range(len(fa)):
-                frame = None
-                for level in self.windows:
-                    if any(first <= m <= last for first, last in self.windows[level].values()):
-                        frame = fa[k] * (1 - w) + fb[k] * w if frame is None else frame
-                        for j, mean in stacks[(level, k)].add(m, frame):
-                            write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
+                frame = fa[k] * (1 - w) + fb[k] * w
+                for level in levels:
+                    for j, mean in stacks[(level, k)].add(m, frame):
+                        write_png_srgb(self.dir / "blur" / level / f"cam{k}" / f"{j:05d}.png", mean)
         seconds["write"] += time.perf_counter() - t0
 
     def _plan_renders(self) -> None:
         """self.rendered: the rendered-frame indices (every one, or render.adaptive_px's schedule from
         the scene geometry: datagen.temporal_sampling) and self.render_plan for the manifest."""
         cfg, T = self.cfg, self.cfg.n_timestamps
-        self.rendered, self.render_plan = np.arange(T), {"adaptive_px": 0.0, "rendered_frames": T, "timestamps": T}
-        for v in self.variants:
-            v.rendered, v.render_plan = self.rendered, self.render_plan
+        if cfg.render.adaptive_px:
+            from datagen.temporal_sampling import frame_steps_px, plan_renders
+
+            mats, samples = self._motion()
+            steps = frame_steps_px(samples, mats, self.poses, self.intr.K, self.kept, T)
+            rendered, plan = plan_renders(steps, self.kept, cfg.render.adaptive_px, cfg.render.max_stride)
+        else:
+            rendered, plan = np.arange(T), {"adaptive_px": 0.0, "rendered_frames": T, "timestamps": T}
+        for job in self.jobs:                       # the variants show the scene's frames
+            job.rendered, job.render_plan = rendered, plan
         if not cfg.render.adaptive_px:
             return
-        from datagen.temporal_sampling import frame_steps_px, plan_renders
-
-        mats, samples = self._motion()
-        steps = frame_steps_px(samples, mats, self.poses, self.intr.K, self.kept, T)
-        self.rendered, self.render_plan = plan_renders(steps, self.kept, cfg.render.adaptive_px, cfg.render.max_stride)
-        for v in self.variants:                     # they show the scene's frames
-            v.rendered, v.render_plan = self.rendered, self.render_plan
         print(f"{cfg.name}: adaptive render: {len(self.rendered)} of {T} frames (<= {cfg.render.adaptive_px:g} px "
               f"between rendered frames, <= {cfg.render.max_stride} apart)", flush=True)
 

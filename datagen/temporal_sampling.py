@@ -45,12 +45,13 @@ def frame_steps_px(samples: dict, mats, poses: np.ndarray, K: np.ndarray, center
         n = max(c - a, b - c, 1)
         lo, cum = view_paths(local, obj, mats, poses[k], K, c, n, T)
         step = np.diff(cum, axis=0)                              # [frames - 1, N]: interval lo + r
-        for r in range(step.shape[0]):
-            i = lo + r
-            if a <= i < max(b, a + 1):
-                s = step[r][np.isfinite(step[r])]
-                if len(s):
-                    steps[i] = max(steps[i], float(np.quantile(s, STEP_QUANTILE)))
+        first, last = max(a, lo), min(max(b, a + 1), lo + step.shape[0])   # the intervals this kept frame owns
+        rows = step[first - lo:last - lo]
+        seen = np.isfinite(rows).any(axis=1)                     # an interval no sample saw says nothing
+        if seen.any():
+            q = np.nanquantile(np.where(np.isfinite(rows[seen]), rows[seen], np.nan), STEP_QUANTILE, axis=1)
+            idx = np.arange(first, last)[seen]
+            steps[idx] = np.maximum(steps[idx], q)
     return steps
 
 

@@ -20,9 +20,6 @@ import torch
 from recon.raster.project_ref import project_ref
 from recon.raster.types import Camera, RenderOutput
 
-BACKENDS = ("torch", "dense", "cpu", "gsplat")
-
-
 def _check(means, quats, scales, opacities, colors, background):
     n = means.shape[0]
     shapes = {"means": (means, (n, 3)), "quats": (quats, (n, 4)), "scales": (scales, (n, 3)),
@@ -100,7 +97,7 @@ def _dense(*args) -> RenderOutput:
 
 # backend name -> render(means, quats, scales, opacities, colors, camera, background); modules load on first use
 RENDERERS = {"torch": _torch, "dense": _dense, "cpu": _cpu, "gsplat": _render_gsplat}
-assert tuple(RENDERERS) == BACKENDS
+BACKENDS = tuple(RENDERERS)
 
 
 def render(means, quats, scales, opacities, colors, camera: Camera, background, backend: str = "auto") -> RenderOutput:
