@@ -15,6 +15,7 @@ the tiny test scene: a 45-iteration warm-up gave log-scale offsets of -180 withi
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Literal
@@ -112,17 +113,25 @@ class DeformFieldConfig:
     encoded position and time (D3DGS's field, recon.deform), or `trajectory`, per-Gaussian
     coefficients of `degree` polynomial and `fourier` sine / cosine pairs of time (Gaussian-Flow's
     dual-domain deformation, recon.trajectory). Trajectory coefficients learn at lr_scale x the
-    means' rate, decaying after the warm-up as the MLP's rate does."""
+    means' rate, decaying after the warm-up as the MLP's rate does. `smoothness` weighs a temporal
+    smoothness term added to the loss while the trajectories are on: the mean acceleration energy of
+    the position offsets over the clip, in units of the scene's extent (recon.trajectory); 0 is off."""
     kind: Literal["mlp", "trajectory"] = "mlp"
     degree: int = 3
     fourier: int = 2
     lr_scale: float = 1.0
+    smoothness: float = 0.0
 
     def __post_init__(self):
         if self.degree < 0 or self.fourier < 0 or self.degree + self.fourier == 0:
             raise ConfigError(f"degree, fourier: expected values >= 0, not both 0; got {self.degree!r}, {self.fourier!r}")
         if not self.lr_scale >= 0:
             raise ConfigError(f"lr_scale: expected a value >= 0, got {self.lr_scale!r}")
+        if not (self.smoothness >= 0 and math.isfinite(self.smoothness)):
+            raise ConfigError(f"smoothness: expected a finite value >= 0, got {self.smoothness!r}")
+        if self.smoothness > 0 and self.kind != "trajectory":
+            raise ConfigError(f"smoothness: regularises per-Gaussian trajectories; expected kind: trajectory "
+                              f"with smoothness {self.smoothness!r}, got kind: {self.kind}")
 
     def spec(self) -> dict:
         """recon.deform.make_field's spec of this field."""

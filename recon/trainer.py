@@ -44,6 +44,7 @@ from recon.method import Method
 from recon.precision import PrecisionChoice, resolve_precision
 from recon.run_folder import ForeignRunError, RunFolder
 from recon.dataset_views import gray_from_srgb
+from recon.trajectory import acceleration_energy, acceleration_gram
 from common.color import linear_to_srgb, rec709_luma
 
 CHECKPOINT_FORMAT = "e4dgs-train-checkpoint/1"
@@ -109,6 +110,7 @@ class Trainer:
         self.fingerprint = fingerprint(method.name, self.cfg, self.dataset)
         self.folder = RunFolder(self.out, method.name, self.fingerprint)
         self.extent = scene_extent(self.dataset)
+        self._gram = None      # the trajectories' acceleration Gram matrix, built at the first smoothness term
         self.device, self.backend = run_placement(self.tcfg.device, self.tcfg.backend)
         self.method.to_device(self.device)
         # the torch generator (split children) stays on the CPU: a seed draws the same on every device
@@ -314,12 +316,24 @@ class Trainer:
                 raise
             raise TrainingError(f"method {self.method.name!r} (plug-in class {cls.__module__}.{cls.__qualname__}): its "
                                 f"step raised {type(exc).__name__}: {exc} at iteration {it}") from exc
+        loss = loss + self._smoothness_term()
         loss_value = float(loss.detach())
         if not math.isfinite(loss_value):
             raise TrainingError(f"{self.method.name}: loss is {loss.item()} at iteration {it}; stopping "
                                 "(the last checkpoint is kept)")
         loss.backward()
         return loss_value, renders
+
+    def _smoothness_term(self):
+        """train.deform_field.smoothness x the trajectories' mean acceleration energy / extent^2 while the
+        deformation is on (0 otherwise)."""
+        fc, model = self.tcfg.deform_field, self.model
+        if not (fc.smoothness > 0 and model.meta.deform_enabled and model.gaussians.motion is not None):
+            return 0.0
+        if self._gram is None:
+            self._gram = acceleration_gram(fc.degree, fc.fourier, model.gaussians.motion.dtype, self.device)
+        energy = acceleration_energy(model.gaussians.motion, fc.degree, fc.fourier, self._gram)
+        return fc.smoothness * energy / self.extent ** 2
 
     def _adapt_density(self, it: int, renders) -> dict:
         """Densification statistics, clone / split / prune (with the method's own pruning, E-4DGS's

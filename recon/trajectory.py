@@ -15,11 +15,22 @@ Adam's moments with them.
 
     trajectory_offsets_ref   readable loop over basis functions
     trajectory_offsets       one matrix product; same signature, tested against the reference
+
+Temporal smoothness (`train.deform_field.smoothness`): the acceleration energy of each Gaussian's
+position offset over the clip, E_i = integral_0^1 |dx_i''(t)|^2 dt, averaged over the Gaussians. It is a
+quadratic form of the coefficients, E_i = sum_ab G_ab <motion[i, a, :3], motion[i, b, :3]>, with the
+Gram matrix of the basis functions' second derivatives G_ab = integral_0^1 basis_a'' basis_b'' dt
+(t, the linear term, costs nothing; a Fourier pair of frequency l costs (2 pi l)^4 / 2 per unit
+coefficient, a t^2 term 4):
+
+    acceleration_energy_ref  readable: x''(t) summed basis by basis at quadrature nodes
+    acceleration_energy      the Gram form, O(N B^2); same signature, tested against the reference
 """
 from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -37,6 +48,55 @@ def trajectory_basis(t: torch.Tensor, degree: int, fourier: int) -> torch.Tensor
         w = 2.0 * math.pi * l
         parts += [torch.sin(w * t), 1.0 - torch.cos(w * t)]
     return torch.stack(parts, dim=-1) if parts else t.new_zeros(t.shape + (0,))
+
+
+def basis_second_derivative(t: torch.Tensor, degree: int, fourier: int) -> torch.Tensor:
+    """t [...] -> [..., B]: d^2/dt^2 of each basis function of trajectory_basis."""
+    parts = [k * (k - 1) * t ** (k - 2) if k >= 2 else torch.zeros_like(t) for k in range(1, degree + 1)]
+    for l in range(1, fourier + 1):
+        w = 2.0 * math.pi * l
+        parts += [-w * w * torch.sin(w * t), w * w * torch.cos(w * t)]
+    return torch.stack(parts, dim=-1)
+
+
+QUADRATURE_NODES = 48   # Gauss-Legendre on [0, 1]: exact for the polynomial part, ~1e-15 for l <= 8
+
+
+def _quadrature(dtype, device):
+    """Gauss-Legendre nodes and weights on [0, 1]: ([Q], [Q])."""
+    x, w = np.polynomial.legendre.leggauss(QUADRATURE_NODES)
+    return (torch.as_tensor((x + 1) / 2, dtype=dtype, device=device),
+            torch.as_tensor(w / 2, dtype=dtype, device=device))
+
+
+def acceleration_gram(degree: int, fourier: int, dtype=torch.float64, device=None) -> torch.Tensor:
+    """[B, B]: G_ab = integral_0^1 basis_a''(t) basis_b''(t) dt."""
+    t, w = _quadrature(torch.float64, None)
+    d2 = basis_second_derivative(t, degree, fourier)              # [Q, B]
+    return (d2.T @ (w[:, None] * d2)).to(dtype=dtype, device=device)
+
+
+def acceleration_energy_ref(motion: torch.Tensor, degree: int, fourier: int) -> torch.Tensor:
+    """motion [N, B, 10] -> scalar: mean over Gaussians of integral_0^1 |dx''(t)|^2 dt (position only);
+    reference: the acceleration built basis function by basis function at each quadrature node."""
+    ts, ws = _quadrature(motion.dtype, motion.device)
+    total = motion.new_zeros(())
+    for t, w in zip(ts, ws):
+        d2 = basis_second_derivative(t, degree, fourier)          # [B]
+        acc = motion.new_zeros(motion.shape[0], 3)
+        for b in range(motion.shape[1]):
+            acc = acc + d2[b] * motion[:, b, 0:3]
+        total = total + w * (acc ** 2).sum(1).mean()
+    return total
+
+
+def acceleration_energy(motion: torch.Tensor, degree: int, fourier: int,
+                        gram: torch.Tensor | None = None) -> torch.Tensor:
+    """Same as acceleration_energy_ref, as the Gram form (gram: acceleration_gram, passed in to reuse it)."""
+    if gram is None:
+        gram = acceleration_gram(degree, fourier, motion.dtype, motion.device)
+    x = motion[:, :, 0:3]                                          # [N, B, 3]
+    return torch.einsum("nad,ab,nbd->n", x, gram, x).mean()
 
 
 def _split(out: torch.Tensor):

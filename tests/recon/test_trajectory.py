@@ -13,8 +13,8 @@ from common.config import ConfigError
 from recon.deform import DeformationField, make_field
 from recon.gaussians import GaussianModel
 from recon.render import deformed
-from recon.trajectory import (TrajectoryField, n_basis, trajectory_basis, trajectory_offsets,
-                              trajectory_offsets_ref)
+from recon.trajectory import (TrajectoryField, acceleration_energy, acceleration_energy_ref, acceleration_gram,
+                              n_basis, trajectory_basis, trajectory_offsets, trajectory_offsets_ref)
 
 
 class Killed(Exception):
@@ -49,6 +49,41 @@ def test_analytic_values():
     assert dx[0, 0].item() == pytest.approx(0.5) and ds[1, 2].item() == pytest.approx(-0.0625)
     assert dq[1, 0].item() == pytest.approx(0.5 * math.sin(math.pi / 2))
     assert dx.shape == (2, 3) and dq.shape == (2, 4) and ds.shape == (2, 3)
+
+
+@pytest.mark.parametrize("degree, fourier", [(3, 2), (1, 0), (0, 3), (5, 4)])
+def test_acceleration_energy_fast_equals_reference_forward_and_backward(degree, fourier):
+    g = torch.Generator().manual_seed(7 + degree)
+    motion = torch.randn(64, n_basis(degree, fourier), 10, generator=g, dtype=torch.float64, requires_grad=True)
+    ref, fast = acceleration_energy_ref(motion, degree, fourier), acceleration_energy(motion, degree, fourier)
+    torch.testing.assert_close(fast, ref, rtol=1e-10, atol=1e-10)
+    (gr,) = torch.autograd.grad(ref, motion)
+    (gf,) = torch.autograd.grad(fast, motion)
+    torch.testing.assert_close(gf, gr, rtol=1e-10, atol=1e-10)
+    assert torch.all(gf[:, :, 3:] == 0)                          # rotation and scale offsets are not penalised
+
+
+def test_acceleration_energy_analytic_values():
+    # degree 3, two Fourier pairs: basis [t, t^2, t^3, sin 2pi t, 1 - cos 2pi t, sin 4pi t, 1 - cos 4pi t]
+    def energy(coeffs):          # coeffs: {basis index: (dx, dy, dz)} of one Gaussian
+        motion = torch.zeros(1, 7, 10, dtype=torch.float64)
+        for b, v in coeffs.items():
+            motion[0, b, 0:3] = torch.tensor(v, dtype=torch.float64)
+            motion[0, b, 3:] = 5.0                                   # rotation / scale: not counted
+        return acceleration_energy(motion, 3, 2).item()
+    assert energy({0: (3.0, -1.0, 2.0)}) == pytest.approx(0.0, abs=1e-12)    # constant velocity: no acceleration
+    assert energy({1: (1.5, 0.0, 0.0)}) == pytest.approx(4 * 1.5 ** 2)        # x'' = 2 a
+    assert energy({2: (0.0, 2.0, 0.0)}) == pytest.approx(12 * 2.0 ** 2)       # x'' = 6 b t: 36 b^2 / 3
+    a, b = 0.7, -0.4                                                       # x'' = 2 a + 6 b t
+    assert energy({1: (a, 0, 0), 2: (b, 0, 0)}) == pytest.approx(4 * a * a + 12 * a * b + 12 * b * b)
+    w1, w2 = 2 * math.pi, 4 * math.pi
+    assert energy({3: (0, 0, 0.1)}) == pytest.approx(w1 ** 4 * 0.01 / 2)     # sin: integral of sin^2 is 1/2
+    assert energy({6: (0.1, 0, 0)}) == pytest.approx(w2 ** 4 * 0.01 / 2)
+    assert energy({3: (0.1, 0, 0), 4: (0.1, 0, 0)}) == pytest.approx(w1 ** 4 * 0.01, rel=1e-10)  # sin, cos orthogonal
+    assert energy({3: (0.1, 0, 0), 5: (0.1, 0, 0)}) == pytest.approx((w1 ** 4 + w2 ** 4) * 0.01 / 2, rel=1e-10)
+    gram = acceleration_gram(3, 2)
+    assert gram.shape == (7, 7) and torch.allclose(gram, gram.T)
+    assert torch.linalg.eigvalsh(gram[1:, 1:]).min() > 0                  # positive definite beyond the linear term
 
 
 def gaussians_with_motion(n=50, seed=0):
@@ -110,6 +145,11 @@ def test_config_is_checked():
         recon.resolve_config("d3dgs", overrides={"train.deform_field.degree": 0, "train.deform_field.fourier": 0})
     with pytest.raises(ConfigError, match="kind"):
         recon.resolve_config("d3dgs", overrides={"train.deform_field.kind": "grid"})
+    with pytest.raises(ConfigError, match="smoothness.*kind: trajectory"):
+        recon.resolve_config("d3dgs", overrides={"train.deform_field.smoothness": 1.0})
+    with pytest.raises(ConfigError, match="smoothness"):
+        recon.resolve_config("d3dgs", overrides={"train.deform_field.kind": "trajectory",
+                                                 "train.deform_field.smoothness": -1.0})
 
 
 TRAJ = {"train.deform_field.kind": "trajectory", "train.init.n_points_object": 400, "train.snapshots": [1.0],
@@ -144,3 +184,15 @@ def test_a_trajectory_model_trains_moves_saves_and_resumes(method, motion_scene,
     resumed = recon.fit(motion_scene, method, overrides=cfg, out_dir=tmp_path / "resumed", progress=False).model
     torch.testing.assert_close(resumed.gaussians.motion, g.motion, rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(resumed.gaussians.means, g.means, rtol=1e-5, atol=1e-6)
+
+
+def test_the_smoothness_term_lowers_the_trajectories_acceleration(motion_scene, tmp_path):
+    cfg = {**TRAJ, "train.iterations": 24}
+    energies = {}
+    for weight in (0.0, 100.0):
+        model = recon.fit(motion_scene, "d3dgs", overrides={**cfg, "train.deform_field.lr_scale": 5,
+                                                             "train.deform_field.smoothness": weight},
+                          out_dir=tmp_path / f"w{weight}", progress=False).model
+        energies[weight] = acceleration_energy(model.gaussians.motion.double(), 3, 2).item()
+    assert energies[0.0] > 0
+    assert energies[100.0] < 0.5 * energies[0.0]
