@@ -38,6 +38,10 @@ def activity_views(dataset: SceneDataset, t_us: int, window_us: int, min_events:
     return views
 
 
+class NoCarvedPointsError(ValueError):
+    """The event carving kept no candidate point: no camera's events agree with any other's."""
+
+
 def carved_points(dataset: SceneDataset, candidates: np.ndarray, n: int, times: int, window: float,
                   min_events: int, dilate_px: int, seed: int = 0) -> tuple[np.ndarray, float]:
     """n initial points [n, 3] drawn from the candidates [M, 3] that the event carving keeps at any of
@@ -47,7 +51,7 @@ def carved_points(dataset: SceneDataset, candidates: np.ndarray, n: int, times: 
     for t in np.linspace(0, dataset.duration_us, times):
         keep |= initial.carve(candidates, activity_views(dataset, int(round(t)), window_us, min_events, dilate_px))
     if not keep.any():
-        raise ValueError(f"{dataset.dir}: the event carving kept no initial point (no camera's events agree "
+        raise NoCarvedPointsError(f"{dataset.dir}: the event carving kept no initial point (no camera's events agree "
                          "with any other's); use init.kind: auto")
     spacing = (np.ptp(candidates, axis=0).prod() / len(candidates)) ** (1 / 3)
     return initial.sample_kept(candidates, keep, n, 0.5 * spacing, seed), float(keep.mean())

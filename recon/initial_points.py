@@ -1,9 +1,12 @@
 """A run's initial Gaussian centres, chosen by the training config (`train.init`): a random cube
 (objects) or sphere shell (rooms) around the rig's target as the paper does, the points of a file,
 or the cube / sphere carved by the events (recon.event_init). The generators themselves are pure
-functions in recon.point_clouds."""
+functions in recon.point_clouds. Where the carving keeps no point (too few events agree between the
+cameras, as with a realistic sensor at high speed) and `init.carve_fallback` is `auto`, the auto
+volume is used instead and an InitFallbackWarning says so (the trainer records it in run.json)."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,7 +15,11 @@ import numpy as np
 from scene_format.reader import SceneDataset
 from recon import point_clouds as initial
 from recon.config import TrainConfig
-from recon.event_init import carved_points
+from recon.event_init import NoCarvedPointsError, carved_points
+
+
+class InitFallbackWarning(UserWarning):
+    """The requested initialisation could not be made; another was used (the message says which and why)."""
 
 
 def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
@@ -24,8 +31,15 @@ def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
         n = ic.n_points_object if auto == "cube" else ic.n_points_room
         candidates = initial_points(dataset, replace(cfg, init=replace(ic, kind=auto, n_points_object=ic.carve_candidates,
                                                                         n_points_room=ic.carve_candidates)))
-        pts, _ = carved_points(dataset, candidates, n, ic.carve_times, ic.carve_window, ic.carve_min_events,
-                               ic.carve_dilate_px, ic.seed)
+        try:
+            pts, _ = carved_points(dataset, candidates, n, ic.carve_times, ic.carve_window, ic.carve_min_events,
+                                   ic.carve_dilate_px, ic.seed)
+        except NoCarvedPointsError as exc:
+            if ic.carve_fallback == "error":
+                raise
+            warnings.warn(InitFallbackWarning(f"init.kind events -> {auto}: {exc} (init.carve_fallback: auto)"),
+                          stacklevel=2)
+            return initial_points(dataset, replace(cfg, init=replace(ic, kind=auto)))
         return pts
     if kind == "cube":
         half = ic.cube_half_size if ic.cube_half_size is not None else 0.35 * scene.rig_radius_m

@@ -48,6 +48,13 @@ class RunFolder:
         info["precision"] = info.get("precision", []) + [{"from_iteration": from_iteration, **choice}]
         write_text_atomic(self.run_json, json.dumps(info, indent=1))
 
+    def record(self, key: str, value) -> None:
+        """A fact of this run in run.json (e.g. `init_fallback`: the initialisation used instead of the
+        configured one, and why)."""
+        info = json.loads(self.run_json.read_text())
+        info[key] = value
+        write_text_atomic(self.run_json, json.dumps(info, indent=1))
+
     def write_log(self, rows: list[dict]) -> None:
         write_text_atomic(self.out / "log.jsonl", "".join(json.dumps(r) + "\n" for r in rows))
 

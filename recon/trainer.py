@@ -20,6 +20,7 @@ import hashlib
 import math
 import json
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -31,7 +32,7 @@ from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock
-from recon.initial_points import initial_points
+from recon.initial_points import InitFallbackWarning, initial_points
 from recon.config import TrainConfig
 from recon.deform import make_field
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
@@ -111,6 +112,7 @@ class Trainer:
         self.folder = RunFolder(self.out, method.name, self.fingerprint)
         self.extent = scene_extent(self.dataset)
         self._gram = None      # the trajectories' acceleration Gram matrix, built at the first smoothness term
+        self.init_fallback = None  # the initialisation used instead of the configured one, and why (run.json)
         self.device, self.backend = run_placement(self.tcfg.device, self.tcfg.backend)
         self.method.to_device(self.device)
         # the torch generator (split children) stays on the CPU: a seed draws the same on every device
@@ -137,7 +139,13 @@ class Trainer:
     # -- set-up -----------------------------------------------------------------------------------
     def _new_model(self) -> DynamicGaussians:
         channels = self.method.channels()
-        pts = initial_points(self.dataset, self.tcfg)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", InitFallbackWarning)
+            pts = initial_points(self.dataset, self.tcfg)
+        for w in caught:                   # any other warning goes on as it came
+            if not issubclass(w.category, InitFallbackWarning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        self.init_fallback = next((str(w.message) for w in caught if issubclass(w.category, InitFallbackWarning)), None)
         bg = list(self.tcfg.background) if self.tcfg.background is not None else scene_background(self.dataset, channels)
         if channels == 1 and len(bg) == 3:
             bg = [float(gray_from_srgb(np.asarray(bg)))]
@@ -287,6 +295,9 @@ class Trainer:
         """Resume the checkpoint (saying so) or set up a fresh model; compile the rasterizer untimed."""
         if not self._load_checkpoint():
             self.setup()
+            if self.init_fallback:         # said and kept: the run did not start from what its config asked
+                tqdm.write(f"{self.method.name} {self.dataset.scene.name}: {self.init_fallback}")
+                self.folder.record("init_fallback", self.init_fallback)
         else:                              # said even without progress bars: a job's log shows its resumes
             tqdm.write(f"{self.method.name}: resuming {self.out} at iteration {self.iteration} of "
                        f"{self.tcfg.iterations} ({self.wall_s:.0f} s trained so far)")

@@ -92,3 +92,33 @@ def test_events_init_puts_points_where_the_scene_is(motion_scene):
     assert carved.shape == (4000, 3) and np.isfinite(carved).all()
     # the carved points are a strictly smaller volume inside the cube (the scene occupies part of it)
     assert np.ptp(carved, axis=0).prod() < 0.9 * np.ptp(cube, axis=0).prod()
+
+
+def test_a_carving_that_keeps_nothing_falls_back_to_the_auto_volume_and_says_so(motion_scene, tmp_path):
+    import json
+    import warnings
+    from dataclasses import replace
+
+    import recon
+    from scene_format.reader import SceneDataset
+    from recon.config import InitConfig, TrainConfig
+    from recon.event_init import NoCarvedPointsError
+    from recon.initial_points import InitFallbackWarning, initial_points
+
+    ds = SceneDataset(motion_scene)
+    nothing = dict(kind="events", n_points_object=500, carve_candidates=5000, carve_min_events=10 ** 9)  # no pixel active
+    cube = initial_points(ds, replace(TrainConfig(), init=InitConfig(kind="auto", n_points_object=500)))
+    with pytest.warns(InitFallbackWarning, match="init.kind events -> cube: .*kept no initial point"):
+        got = initial_points(ds, replace(TrainConfig(), init=InitConfig(**nothing)))
+    np.testing.assert_array_equal(got, cube)                  # the paper's volume, as kind: auto would draw it
+    with pytest.raises(NoCarvedPointsError, match="kept no initial point"):
+        initial_points(ds, replace(TrainConfig(), init=InitConfig(**nothing, carve_fallback="error")))
+    # a run records it in run.json and trains on
+    overrides = {"train.iterations": 3, "train.scale_schedule": False, "train.warm_up": 100,
+                 **{f"train.init.{k}": v for k, v in nothing.items()}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")       # the short schedule's own ConfigWarnings
+        recon.fit(motion_scene, "e4dgs", overrides=overrides, out_dir=tmp_path / "run", progress=False)
+    run = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert run["init_fallback"].startswith("init.kind events -> cube")
+    assert (tmp_path / "run" / "model.pt").exists()
