@@ -52,6 +52,6 @@ def carved_points(dataset: SceneDataset, candidates: np.ndarray, n: int, times: 
         keep |= initial.carve(candidates, activity_views(dataset, int(round(t)), window_us, min_events, dilate_px))
     if not keep.any():
         raise NoCarvedPointsError(f"{dataset.dir}: the event carving kept no initial point (no camera's events agree "
-                         "with any other's); use init.kind: auto")
+                                  "with any other's)")
     spacing = (np.ptp(candidates, axis=0).prod() / len(candidates)) ** (1 / 3)
     return initial.sample_kept(candidates, keep, n, 0.5 * spacing, seed), float(keep.mean())

@@ -36,7 +36,7 @@ def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
                                    ic.carve_dilate_px, ic.seed)
         except NoCarvedPointsError as exc:
             if ic.carve_fallback == "error":
-                raise
+                raise NoCarvedPointsError(f"{exc}; use init.kind: auto, or init.carve_fallback: auto") from None
             warnings.warn(InitFallbackWarning(f"init.kind events -> {auto}: {exc} (init.carve_fallback: auto)"),
                           stacklevel=2)
             return initial_points(dataset, replace(cfg, init=replace(ic, kind=auto)))

@@ -108,10 +108,10 @@ def test_a_carving_that_keeps_nothing_falls_back_to_the_auto_volume_and_says_so(
     ds = SceneDataset(motion_scene)
     nothing = dict(kind="events", n_points_object=500, carve_candidates=5000, carve_min_events=10 ** 9)  # no pixel active
     cube = initial_points(ds, replace(TrainConfig(), init=InitConfig(kind="auto", n_points_object=500)))
-    with pytest.warns(InitFallbackWarning, match="init.kind events -> cube: .*kept no initial point"):
+    with pytest.warns(InitFallbackWarning, match=r"init.kind events -> cube: .*kept no initial point .*\) \(init.carve_fallback: auto\)$"):
         got = initial_points(ds, replace(TrainConfig(), init=InitConfig(**nothing)))
     np.testing.assert_array_equal(got, cube)                  # the paper's volume, as kind: auto would draw it
-    with pytest.raises(NoCarvedPointsError, match="kept no initial point"):
+    with pytest.raises(NoCarvedPointsError, match="kept no initial point.*use init.kind: auto, or init.carve_fallback: auto"):
         initial_points(ds, replace(TrainConfig(), init=InitConfig(**nothing, carve_fallback="error")))
     # a run records it in run.json and trains on
     overrides = {"train.iterations": 3, "train.scale_schedule": False, "train.warm_up": 100,
