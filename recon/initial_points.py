@@ -51,3 +51,18 @@ def initial_points(dataset: SceneDataset, cfg: TrainConfig) -> np.ndarray:
     if not path.exists():
         raise FileNotFoundError(f"init.points_file: {path} does not exist")
     return initial.from_point_cloud(np.load(path), seed=ic.seed)
+
+
+def initial_points_noting_fallback(dataset: SceneDataset, cfg: TrainConfig) -> tuple[np.ndarray, str | None]:
+    """initial_points and, where it fell back from the configured initialisation, the
+    InitFallbackWarning's message (else None); any other warning passes on as it came."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", InitFallbackWarning)
+        pts = initial_points(dataset, cfg)
+    note = None
+    for w in caught:
+        if issubclass(w.category, InitFallbackWarning):
+            note = note or str(w.message)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return pts, note

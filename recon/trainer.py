@@ -20,7 +20,6 @@ import hashlib
 import math
 import json
 import time
-import warnings
 from pathlib import Path
 from typing import Any, Callable
 
@@ -32,7 +31,7 @@ from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
 from common.fileio import atomic_output, output_lock
-from recon.initial_points import InitFallbackWarning, initial_points
+from recon.initial_points import initial_points_noting_fallback
 from recon.config import TrainConfig
 from recon.deform import make_field
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
@@ -139,13 +138,7 @@ class Trainer:
     # -- set-up -----------------------------------------------------------------------------------
     def _new_model(self) -> DynamicGaussians:
         channels = self.method.channels()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", InitFallbackWarning)
-            pts = initial_points(self.dataset, self.tcfg)
-        for w in caught:                   # any other warning goes on as it came
-            if not issubclass(w.category, InitFallbackWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        self.init_fallback = next((str(w.message) for w in caught if issubclass(w.category, InitFallbackWarning)), None)
+        pts, self.init_fallback = initial_points_noting_fallback(self.dataset, self.tcfg)
         bg = list(self.tcfg.background) if self.tcfg.background is not None else scene_background(self.dataset, channels)
         if channels == 1 and len(bg) == 3:
             bg = [float(gray_from_srgb(np.asarray(bg)))]
