@@ -44,9 +44,8 @@ class RunFolder:
     def record_precision(self, from_iteration: int, choice: dict) -> None:
         """One start's deformation precision in run.json's `precision` list (a resumed `auto` run measures
         again on the machine it resumes on)."""
-        info = json.loads(self.run_json.read_text())
-        info["precision"] = info.get("precision", []) + [{"from_iteration": from_iteration, **choice}]
-        write_text_atomic(self.run_json, json.dumps(info, indent=1))
+        starts = json.loads(self.run_json.read_text()).get("precision", [])
+        self.record("precision", starts + [{"from_iteration": from_iteration, **choice}])
 
     def record(self, key: str, value) -> None:
         """A fact of this run in run.json (e.g. `init_fallback`: the initialisation used instead of the

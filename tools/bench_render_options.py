@@ -23,7 +23,7 @@ from common.machine import cpu_summary
 from datagen.config import load_preset, resolve_scene
 from datagen.render import render_clip
 from simulator.simulator import simulate
-from tools.bench_render_rate import nearest_time_errors
+from tools.bench_render_rate import compare_streams
 
 
 def main(argv=None) -> int:
@@ -52,7 +52,6 @@ def main(argv=None) -> int:
         rows.append((samples, shadows, sec / (len(tau) * len(args.cameras)), streams))
         print(f"  samples {samples}, shadows {'on' if shadows else 'off'}: {sec:.1f} s", flush=True)
     ref = rows[0][3]
-    n_ref = sum(len(s) for s in ref)
     print(f"\nWorkbench options vs. the preset's own (samples {own[0]}, shadows {'on' if own[1] else 'off'}), scene "
           f"{args.scene} ({args.preset}), cameras {args.cameras}, {args.duration_ms:g} ms at {fps:g} FPS, "
           f"{base.render.width}x{base.render.height}; CPU {cpu_summary()}")
@@ -60,13 +59,9 @@ def main(argv=None) -> int:
           "median / p90 (us) | events with no counterpart |")
     print("|---|---|---|---|---|---|---|---|")
     for samples, shadows, per_view, streams in rows:
-        n = sum(len(s) for s in streams)
-        errs = np.concatenate([nearest_time_errors(s, r, base.render.width) for s, r in zip(streams, ref)])
-        found = errs[np.isfinite(errs)]
-        med, p90 = (np.median(found), np.percentile(found, 90)) if len(found) else (np.nan, np.nan)
-        print(f"| {samples} | {'on' if shadows else 'off'} | {per_view:.3f} | {per_view / rows[0][2]:.2f}x | {n:,} | "
-              f"{100 * (n - n_ref) / max(n_ref, 1):+.2f} % | {med:.1f} / {p90:.1f} | "
-              f"{100 * (len(errs) - len(found)) / max(n, 1):.2f} % |")
+        count_err, med, p90, lost = compare_streams(streams, ref, base.render.width)
+        print(f"| {samples} | {'on' if shadows else 'off'} | {per_view:.3f} | {per_view / rows[0][2]:.2f}x | "
+              f"{sum(len(s) for s in streams):,} | {count_err:+.2f} % | {med:.1f} / {p90:.1f} | {lost:.2f} % |")
     return 0
 
 

@@ -45,6 +45,16 @@ def nearest_time_errors(events: np.ndarray, reference: np.ndarray, width: int) -
     return best
 
 
+def compare_streams(streams: list[np.ndarray], reference: list[np.ndarray], width: int) -> tuple[float, float, float, float]:
+    """Per-camera event streams against the reference's -> (count error %, median and p90 us to the
+    nearest reference event of the same pixel and polarity, % of events with no such counterpart)."""
+    n, n_ref = sum(len(s) for s in streams), sum(len(s) for s in reference)
+    errs = np.concatenate([nearest_time_errors(s, r, width) for s, r in zip(streams, reference)])
+    found = errs[np.isfinite(errs)]
+    med, p90 = (float(np.median(found)), float(np.percentile(found, 90))) if len(found) else (np.nan, np.nan)
+    return 100 * (n - n_ref) / max(n_ref, 1), med, p90, 100 * (len(errs) - len(found)) / max(n, 1)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="lego")
@@ -71,12 +81,9 @@ def main(argv=None) -> int:
           "events with no counterpart |")
     print("|---|---|---|---|---|---|")
     for fps in rates:
-        n = sum(len(s) for s in streams[fps])
-        n_ref = sum(len(s) for s in ref)
-        errs = np.concatenate([nearest_time_errors(s, r, cfg.render.width) for s, r in zip(streams[fps], ref)])
-        found = errs[np.isfinite(errs)]
-        print(f"| {fps} | {seconds[fps]:.1f} | {n:,} | {100 * (n - n_ref) / max(n_ref, 1):+.1f} % | "
-              f"{np.median(found):.1f} / {np.percentile(found, 90):.1f} | {100 * (len(errs) - len(found)) / max(n, 1):.2f} % |")
+        count_err, med, p90, lost = compare_streams(streams[fps], ref, cfg.render.width)
+        print(f"| {fps} | {seconds[fps]:.1f} | {sum(len(s) for s in streams[fps]):,} | {count_err:+.1f} % | "
+              f"{med:.1f} / {p90:.1f} | {lost:.2f} % |")
     return 0
 
 
