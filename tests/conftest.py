@@ -33,5 +33,19 @@ def generate_cubes(tmp_path_factory, preset: str):
 @pytest.fixture(scope="session")
 def motion_scene(tmp_path_factory):
     """The `tiny_motion` preset's cubes scene (Blender + simulator, ~4 s): 2 cameras, 64x48, 61
-    timestamps, 46 train / 16 test frames, blur levels mild and strong. Shared by the recon tests."""
+    timestamps, 46 train / 16 test frames, blur levels mild and strong. Shared by the recon tests.
+
+    On a machine without Blender (a GPU box running tests/recon/test_gsplat_cuda.py), set
+    E4DGS_TEST_MOTION_SCENE to a copy of that scene generated elsewhere (`python -m datagen.generate
+    --scene cubes --preset tiny_motion --out DIR`); it is copied, so the tests cannot alter it."""
+    import os
+    import shutil
+    from pathlib import Path
+
+    given = os.environ.get("E4DGS_TEST_MOTION_SCENE")
+    if given:
+        src = Path(given)
+        if not (src / "manifest.json").is_file():
+            pytest.exit(f"E4DGS_TEST_MOTION_SCENE={given}: expected a generated scene folder holding manifest.json")
+        return Path(shutil.copytree(src, tmp_path_factory.mktemp("tiny_motion") / src.name))
     return generate_cubes(tmp_path_factory, "tiny_motion")
