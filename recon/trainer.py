@@ -95,6 +95,23 @@ def warn_static_schedule(tcfg: TrainConfig, sched) -> None:
             "initial points are never densified"), stacklevel=3)
 
 
+
+def warn_capped_densification(tcfg: TrainConfig, n_initial: int) -> None:
+    """A ConfigWarning when the run starts with at least densify.max_gaussians Gaussians: no Gaussian
+    is cloned or split until pruning brings the count below the cap (a room's 20k initial points
+    under a 15k cap kept garage's models at their initial, blurry Gaussians; docs/recon.md)."""
+    import warnings
+
+    from common.config import ConfigWarning
+
+    cap = tcfg.densify.max_gaussians
+    if tcfg.densify.enabled and n_initial >= cap:
+        warnings.warn(ConfigWarning(
+            f"train.densify.max_gaussians = {cap} <= the {n_initial} initial Gaussians: nothing is cloned or "
+            "split until pruning brings the count below it; raise max_gaussians or lower train.init.n_points_*"),
+            stacklevel=3)
+
+
 class Trainer:
     def __init__(self, method: Method, out_dir: str | Path, progress: bool = True,
                  on_iteration: Callable[["Trainer", int], None] | None = None):
@@ -288,6 +305,7 @@ class Trainer:
         """Resume the checkpoint (saying so) or set up a fresh model; compile the rasterizer untimed."""
         if not self._load_checkpoint():
             self.setup()
+            warn_capped_densification(self.tcfg, len(self.model))
             if self.init_fallback:         # said and kept: the run did not start from what its config asked
                 tqdm.write(f"{self.method.name} {self.dataset.scene.name}: {self.init_fallback}")
                 self.folder.record("init_fallback", self.init_fallback)

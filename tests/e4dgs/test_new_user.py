@@ -195,6 +195,27 @@ def test_a_budget_that_ends_before_the_deformation_or_densification_starts_is_sa
     assert evals and all(r["test_psnr_on"] == "rgb" for r in evals)        # what the number compares, in the log
 
 
+
+def test_a_densification_cap_below_the_initial_count_is_said(motion_scene, tmp_path):
+    """Rooms started from 20k points under the quick recipes' 15k cap and never densified: said now."""
+    import warnings
+
+    import recon
+    from common.config import ConfigWarning
+
+    def said(cap):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            recon.fit(motion_scene, "d3dgs", overrides={"train.iterations": 2, "train.init.n_points_object": 60,
+                                                        "train.densify.max_gaussians": cap},
+                      out_dir=tmp_path / f"cap{cap}", progress=False)
+        return [str(w.message) for w in caught if issubclass(w.category, ConfigWarning) and "max_gaussians" in str(w.message)]
+
+    assert said(60) == ["train.densify.max_gaussians = 60 <= the 60 initial Gaussians: nothing is cloned or split until "
+                        "pruning brings the count below it; raise max_gaussians or lower train.init.n_points_*"]
+    assert said(61) == []
+
+
 def test_frames_that_are_not_intensity_are_refused(tmp_path):
     """Alpha or depth channels were read as intensity, and a fully transparent PNG as white."""
     import cv2
