@@ -95,7 +95,6 @@ def warn_static_schedule(tcfg: TrainConfig, sched) -> None:
             "initial points are never densified"), stacklevel=3)
 
 
-
 def warn_capped_densification(tcfg: TrainConfig, n_initial: int) -> None:
     """A ConfigWarning when the run starts with at least densify.max_gaussians Gaussians: no Gaussian
     is cloned or split until pruning brings the count below the cap (a room's 20k initial points
