@@ -584,14 +584,26 @@ def test_config_integers_beyond_64_bits_are_refused_by_key():
 
 def test_shipped_configs_leave_densification_room_above_their_initial_points():
     """A cap at or below the initial count stops densification (garage never densified under the quick
-    recipes' 15k cap and 20k room points). The example configs hold for objects and rooms; the bench
-    recipes for objects, their rooms until the leaderboard is re-run with a new cap (docs/e4dgs.md)."""
+    recipes' 15k cap and 20k room points). Every example config holds for objects and rooms; every
+    bench preset's cell on each of its scenes, with the scene's overrides and the scene's kind."""
     import recon
+    import yaml
+    from benchmark.config import load_bench
 
-    root = Path(__file__).resolve().parents[2] / "configs" / "recon"
-    for path in sorted(root.glob("*.yaml")) + sorted((root / "bench").glob("*.yaml")):
-        method = path.stem.removesuffix("_quick")
-        t = recon.resolve_config(method, path).train
-        assert t.densify.max_gaussians > t.init.n_points_object, path.name
-        if path.parent == root:
-            assert t.densify.max_gaussians > t.init.n_points_room, path.name
+    repo = Path(__file__).resolve().parents[2]
+    root = repo / "configs" / "recon"
+    for path in sorted(root.glob("*.yaml")):
+        t = recon.resolve_config(path.stem.removesuffix("_quick"), path).train
+        assert t.densify.max_gaussians > max(t.init.n_points_object, t.init.n_points_room), path.name
+    checked = set()
+    for preset in sorted((repo / "configs" / "bench").glob("*.yaml")):
+        bench = load_bench(preset)
+        for scene in bench.scenes:
+            kind = yaml.safe_load((repo / "blender_scenes" / f"{scene}.yaml").read_text())["kind"]
+            for name, cell in bench.cells.items():
+                config = str(repo / cell.config) if cell.config else None      # None: the method's defaults
+                t = recon.resolve_config(cell.method, config, overrides=bench.overrides(scene, name)).train
+                n0 = t.init.n_points_room if kind == "room" else t.init.n_points_object
+                assert t.densify.max_gaussians > n0, (preset.name, scene, name, t.densify.max_gaussians, n0)
+                checked.add(kind)
+    assert checked == {"object", "room"}
