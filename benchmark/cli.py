@@ -110,9 +110,23 @@ def run_score(args: argparse.Namespace) -> int:
                          None if lpips == "none" else lpips,
                          tuple(cfg.snapshot_metrics) if cfg is not None else ("psnr", "ssim"), args.label)
     all_rows = append_rows(out / "results.jsonl", rows, tuple(cfg.cells) if cfg is not None else ())
+    if cfg is not None:
+        all_rows = tabled_rows(cfg, all_rows, out)
     paths = write_report(all_rows, out, report_header(name, cfg) if cfg is not None else "", cfg)
     print(f"score: {len(rows)} row(s) added to {out / 'results.jsonl'}; wrote " + ", ".join(str(p) for p in paths))
     return 0
+
+
+def tabled_rows(cfg, rows: list[dict], out: Path) -> list[dict]:
+    """The rows the tables show: the preset's current ones (benchmark.config.current_rows), saying how
+    many stale rows results.jsonl keeps out of them."""
+    from benchmark.config import current_rows
+
+    kept, stale = current_rows(cfg, rows)
+    if stale:
+        print(f"bench: {len(stale)} row(s) of {out / 'results.jsonl'} left out of the tables: no job of the preset "
+              f"has their config any more (e.g. {stale[0]['key']})", file=sys.stderr)
+    return kept
 
 
 def run_bench_cli(args: argparse.Namespace) -> int:
@@ -155,7 +169,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
         # a refused job, dataset or results file is a typed error: e4dgs.cli prints it as one line
         run_bench(cfg, name, args.data or Path("data") / cfg.dataset, out, scenes, cells, studies,
                   progress=not args.no_progress, ray=ray_options(args))
-    rows = read_results(out / "results.jsonl")
+    rows = tabled_rows(cfg, read_results(out / "results.jsonl"), out)
     paths = write_report(rows, out, header, cfg)
     print("bench: wrote " + ", ".join(str(p) for p in paths))
     failed = [r["key"] for r in rows if r.get("status") == "failed" and (not scenes or r.get("scene") in scenes)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -314,6 +314,20 @@ def _jobs(cfg: BenchConfig) -> list[Job]:
                 out.append(Job("ablation", a.scene, a.base, variant, c.method, c.config,
                                {**cfg.overrides(a.scene, a.base), **switch, **seeded}, seed))
     return out
+
+
+def current_rows(cfg: BenchConfig, rows: list[dict]) -> tuple[list[dict], list[dict]]:
+    """(rows of the preset as it is now, stale rows). A bench row is stale when no job of the preset has
+    its key and config hash any more (another recipe, cap or speed list made it; results.jsonl keeps
+    it): the tables must not mix configs. Rows scored from outside (`e4dgs score`) are always kept,
+    and ablation rows are matched at their own seed (the seeds are chosen per run)."""
+    seeds = tuple(sorted({*cfg.ablation.seeds, *(r["seed"] for r in rows if r.get("study") == "ablation"
+                                                  and isinstance(r.get("seed"), int))}))
+    wanted = {(j.key, j.config_hash()) for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=seeds)))}
+    kept, stale = [], []
+    for r in rows:
+        (kept if r.get("external") or (r.get("key"), r.get("config_hash")) in wanted else stale).append(r)
+    return kept, stale
 
 
 def dump(cfg: BenchConfig) -> dict:
