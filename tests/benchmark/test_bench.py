@@ -287,7 +287,8 @@ def test_report_refuses_empty_results(tmp_path):
 def test_bench_report_cli_regenerates_without_training(tmp_path):
     from e4dgs.cli import main
 
-    rows = [_row("main", "lego", c, 20.0 + k) for k, c in enumerate(MAIN_CELLS)]
+    hashes = {j.key: j.config_hash() for j in jobs(load_bench("quick"))}    # rows of the preset's own jobs
+    rows = [{**_row("main", "lego", c, 20.0 + k), "config_hash": hashes[f"main/lego/{c}"]} for k, c in enumerate(MAIN_CELLS)]
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     assert main(["bench", "--preset", "quick", "--out", str(tmp_path), "--report"]) == 0
     md = (tmp_path / "leaderboard.md").read_text()
@@ -464,3 +465,23 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
     assert [r["cell"] for r in rows] == ["d3dgs_sharp"]
     assert counts == {"resolve_config": 1, "SceneDataset": 1, "config_hash": 1, "manifest.json": 1,
                       "scene.yaml": 1, "cameras.json": 1}, counts
+
+
+def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():
+    """A row made under another cap or speed list stays in results.jsonl but not in the tables; the
+    current jobs' rows, rows scored from outside and ablation rows of a seed chosen at run time stay."""
+    from dataclasses import replace
+
+    from benchmark.config import current_rows
+
+    cfg = load_bench("quick")
+    current = [j.identity() for j in jobs(cfg)]
+    speed_row = next(r for r in current if r["study"] == "speed" and r["variant"] == "x26.2")
+    old_speed = {**speed_row, "key": speed_row["key"].replace("x26.2", "x31.6"), "variant": "x31.6"}
+    old_cap = {**current[0], "config_hash": "0" * 16}
+    outside = {"key": "main/hinge/mine", "study": "main", "config_hash": "abc", "external": True}
+    extra_seed = [j.identity() for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=(7,))))
+                  if j.study == "ablation"]
+    kept, stale = current_rows(cfg, current + [old_speed, old_cap, outside] + extra_seed)
+    assert stale == [old_speed, old_cap]
+    assert kept == current + [outside] + extra_seed
