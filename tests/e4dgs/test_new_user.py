@@ -587,8 +587,10 @@ def test_shipped_configs_leave_densification_room_above_their_initial_points():
     recipes' 15k cap and 20k room points). Every example config holds for objects and rooms; every
     bench preset's cell on each of its scenes, with the scene's overrides and the scene's kind."""
     import recon
-    import yaml
-    from benchmark.config import load_bench
+    from benchmark.config import jobs, load_bench
+    from benchmark.job_run import resolve_job
+    from datagen.config import scene_yaml_path
+    from scene_format.config import read_scene_config
 
     repo = Path(__file__).resolve().parents[2]
     root = repo / "configs" / "recon"
@@ -597,13 +599,10 @@ def test_shipped_configs_leave_densification_room_above_their_initial_points():
         assert t.densify.max_gaussians > max(t.init.n_points_object, t.init.n_points_room), path.name
     checked = set()
     for preset in sorted((repo / "configs" / "bench").glob("*.yaml")):
-        bench = load_bench(preset)
-        for scene in bench.scenes:
-            kind = yaml.safe_load((repo / "blender_scenes" / f"{scene}.yaml").read_text())["kind"]
-            for name, cell in bench.cells.items():
-                config = str(repo / cell.config) if cell.config else None      # None: the method's defaults
-                t = recon.resolve_config(cell.method, config, overrides=bench.overrides(scene, name)).train
-                n0 = t.init.n_points_room if kind == "room" else t.init.n_points_object
-                assert t.densify.max_gaussians > n0, (preset.name, scene, name, t.densify.max_gaussians, n0)
-                checked.add(kind)
+        for job in (j for j in jobs(load_bench(preset)) if j.study == "main"):    # every cell on every scene
+            kind = read_scene_config(scene_yaml_path(job.scene)).kind
+            t = resolve_job(job).train
+            n0 = t.init.n_points_room if kind == "room" else t.init.n_points_object
+            assert t.densify.max_gaussians > n0, (preset.name, job.scene, job.cell, t.densify.max_gaussians, n0)
+            checked.add(kind)
     assert checked == {"object", "room"}
