@@ -5,7 +5,7 @@ root as `python -m tools.<name>` (they are not installed with the package).
     bench_train        seconds per training iteration of every method, by part (docs/recon.md)
     bench_threads      the same at 1 / 2 threads, and the rasterizer's thread scaling
     bench_raster       the rasterizer backends on synthetic and training-state models (docs/rasterizer.md)
-    field_curves       learning curves, deformation MLP against per-Gaussian trajectories (docs/e4dgs.md)
+    field_curves       learning curves, deformation MLP against per-Gaussian trajectories (docs/learning_curves.md)
     calibrate          the blur levels as speeds, from the speed study's rows (docs/benchmark.md)
     bench_ray          the benchmark's jobs serially against Ray tasks (docs/benchmark.md)
     bench_simulator    the event simulator's kernels (docs/simulator.md)
