@@ -80,16 +80,25 @@ def _generate_on_ray(preset, scenes: list[str], out: Path, checkpoint_every: int
     return failed
 
 
+def crashed(returncode: int) -> bool:
+    """A worker that died from a signal (a crash: SIGABRT from a corrupted heap, SIGSEGV, the OOM
+    killer's SIGKILL), as opposed to one that exited with its own error status (bad input, which
+    would fail again)."""
+    return returncode < 0
+
+
 def generate_dataset(preset: str | Path, scenes: list[str] | None, out: Path, jobs: int = 1,
                      checkpoint_every: int = 100, log: Callable[[str], None] = print, ray=None,
-                     scene_args: dict[str, list[str]] | None = None) -> list[str]:
+                     scene_args: dict[str, list[str]] | None = None, retries: int = 2) -> list[str]:
     """Generate (or resume, or skip when complete) each scene into out/<scene>; returns the scenes
     whose worker failed. Finished scenes are skipped by their workers, killed ones resume. `jobs`
-    scenes run side by side here, or every scene as a Ray task when `ray` is given. `scene_args`
-    gives scenes that are not the preset's (from a user's file or scene YAML) their worker arguments
-    (see _worker_cmd); the preset then only supplies the render settings."""
-    if jobs < 1 or checkpoint_every < 1:
-        raise ValueError(f"jobs and checkpoint_every must be >= 1, got {jobs}, {checkpoint_every}")
+    scenes run side by side here, or every scene as a Ray task when `ray` is given (ray.retries
+    re-runs). Here a worker that crashes is started again `retries` times, resuming from the scene's
+    last checkpoint; one that exits with an error status is not. `scene_args` gives scenes that are
+    not the preset's (from a user's file or scene YAML) their worker arguments (see _worker_cmd); the
+    preset then only supplies the render settings."""
+    if jobs < 1 or checkpoint_every < 1 or retries < 0:
+        raise ValueError(f"jobs and checkpoint_every must be >= 1 and retries >= 0, got {jobs}, {checkpoint_every}, {retries}")
     scene_args = dict(scene_args or {})
     if scene_args:
         scenes = list(scenes or scene_args)
@@ -109,6 +118,7 @@ def generate_dataset(preset: str | Path, scenes: list[str] | None, out: Path, jo
     pending = list(scenes)
     running: list[tuple[str, subprocess.Popen]] = []
     failed: list[str] = []
+    restarts = {s: 0 for s in scenes}
     while pending or running:
         while pending and len(running) < jobs:
             scene = pending.pop(0)
@@ -118,7 +128,14 @@ def generate_dataset(preset: str | Path, scenes: list[str] | None, out: Path, jo
         for scene, proc in list(running):
             if proc.poll() is not None:
                 running.remove((scene, proc))
-                if proc.returncode != 0:
+                if proc.returncode == 0:
+                    continue
+                if crashed(proc.returncode) and restarts[scene] < retries:
+                    restarts[scene] += 1
+                    log(f"dataset: {scene}: worker died from signal {-proc.returncode}; starting it again from "
+                        f"its last checkpoint (restart {restarts[scene]} of {retries})")
+                    pending.insert(0, scene)
+                else:
                     failed.append(scene)
         time.sleep(0.2)
     log(f"dataset: {len(scenes) - len(failed)} of {len(scenes)} scene(s) done in {time.time() - t0:.0f} s -> {out}")

@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import add_ray_arguments, name_list, positive_int, ray_options
+from common.argtypes import add_ray_arguments, name_list, nonnegative_int, positive_int, ray_options
 
 
 def add_dataset_parser(sub) -> None:
@@ -26,6 +26,9 @@ def add_dataset_parser(sub) -> None:
     p.add_argument("--scene-config", type=Path, action="append", default=None,
                    help="a scene YAML (e.g. one with source: {file: ...}) instead of the preset's scenes; "
                         "may be given several times")
+    p.add_argument("--retries", type=nonnegative_int, default=2, metavar="N",
+                   help="starts again, from its last checkpoint, of a scene whose worker crashes (dies from a "
+                        "signal) before the scene is reported failed (default 2; with --ray, --ray-retries)")
     add_ray_arguments(p, "each scene's generation")
     p.set_defaults(func=run_dataset)
 
@@ -72,7 +75,7 @@ def run_dataset(args: argparse.Namespace) -> int:
         scenes = preset_scenes(args.preset, wanted)      # a bad preset or scene: one line, before any work
     out = args.out or Path("data") / Path(str(args.preset)).stem.removeprefix("dataset_")
     failed = generate_dataset(args.preset, scenes, out, args.jobs, args.checkpoint_every, ray=ray_options(args),
-                              scene_args=scene_args)
+                              scene_args=scene_args, retries=args.retries)
     done = [s for s in scenes if s not in failed]
     if done and out.is_dir():
         from datagen.summary import blur_table
