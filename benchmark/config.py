@@ -320,13 +320,16 @@ def current_rows(cfg: BenchConfig, rows: list[dict]) -> tuple[list[dict], list[d
     """(rows of the preset as it is now, stale rows). A bench row is stale when no job of the preset has
     its key and config hash any more (another recipe, cap or speed list made it; results.jsonl keeps
     it): the tables must not mix configs. Rows scored from outside (`e4dgs score`) are always kept,
-    and ablation rows are matched at their own seed (the seeds are chosen per run)."""
+    and ablation rows are matched at their own seed (the seeds are chosen per run). The kept rows come in
+    the preset's scene order (stably), so the tables' columns do not follow which scene was re-run last."""
     seeds = tuple(sorted({*cfg.ablation.seeds, *(r["seed"] for r in rows if r.get("study") == "ablation"
                                                   and isinstance(r.get("seed"), int))}))
     wanted = {(j.key, j.config_hash()) for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=seeds)))}
     kept, stale = [], []
     for r in rows:
         (kept if r.get("external") or (r.get("key"), r.get("config_hash")) in wanted else stale).append(r)
+    order = {s: i for i, s in enumerate(cfg.scenes)}
+    kept.sort(key=lambda r: order.get(r.get("scene"), len(order)))
     return kept, stale
 
 

@@ -484,4 +484,10 @@ def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():
                   if j.study == "ablation"]
     kept, stale = current_rows(cfg, current + [old_speed, old_cap, outside] + extra_seed)
     assert stale == [old_speed, old_cap]
-    assert kept == current + [outside] + extra_seed
+    order = {s: i for i, s in enumerate(cfg.scenes)}
+    assert kept == sorted(current + [outside] + extra_seed, key=lambda r: order.get(r.get("scene"), len(order)))
+    # a scene re-run last (its rows at the end of results.jsonl) keeps its place in the tables
+    first = [r for r in current if r.get("scene") == cfg.scenes[0]]
+    rest = [r for r in current if r.get("scene") != cfg.scenes[0]]
+    kept, _ = current_rows(cfg, rest + first)
+    assert [r.get("scene") for r in kept][:len(first)] == [cfg.scenes[0]] * len(first)
