@@ -9,7 +9,9 @@ scene's speed variants (`speeds.factors`, datagen.speed) take the same frames in
 with its own simulators (at its compressed timestamps) and blur sums, and become the folders
 `<scene>_x<s>`. A checkpoint (simulator states, spool counts, open blur sums, timings, of the scene
 and of every variant) is saved every `checkpoint_every` timestamps; a killed run restarted with the
-same config continues from it and ends with the same files. `manifest.json` is written last (the
+same config continues from it and ends with the same files; what it measured from the geometry before
+rendering (blur windows, dynamic masks, render schedule) is kept beside the checkpoint
+(datagen.geometry_cache) and not measured again. `manifest.json` is written last (the
 variants' before the scene's): a scene folder without it is incomplete.
 """
 from __future__ import annotations
@@ -27,6 +29,7 @@ from tqdm import tqdm
 import common
 from common import provenance
 from common.provenance import git_commit as _git_commit
+from datagen import geometry_cache
 from datagen import render as R
 from datagen.blur import BlurStack
 from datagen.blur_geometry import BlurReport, measure_blur_many
@@ -140,11 +143,18 @@ class SceneJob:
         t_start = time.perf_counter()
         cams = R.build_scene(cfg, self.intr)
         t_blur = time.perf_counter()
-        self._measure_blur()  # before anything is written: a level out of reach leaves no output behind
-        self.measure_dynamic()
-        self._plan_renders()
+        cached = self.dir.is_dir() and geometry_cache.load(self.dir, self.fingerprint, self.jobs)
+        if cached:      # an earlier start measured it (15-27 min in a paper-preset room)
+            print(f"{cfg.name}: blur exposures, dynamic masks and render schedule from an earlier start "
+                  f"({geometry_cache.FILE_NAME})", flush=True)
+        else:
+            self._measure_blur()  # before anything is written: a level out of reach leaves no output behind
+            self.measure_dynamic()
+            self._plan_renders()
         t_blur = time.perf_counter() - t_blur
         self.dir.mkdir(parents=True, exist_ok=True)
+        if not cached:
+            geometry_cache.save(self.dir, self.fingerprint, self.jobs)
         renderer = R.ViewRenderer()
         ckpt = JobCheckpoint(self.dir / ".generate.ckpt.npz", self.fingerprint)
         state = self._resumable_state(ckpt)
@@ -194,6 +204,7 @@ class SceneJob:
             variant._write_metadata(secs)
         self._write_metadata(seconds[0])
         ckpt.remove()
+        geometry_cache.remove(self.dir)
         self._exports()
         return self.dir
 

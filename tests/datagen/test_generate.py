@@ -246,9 +246,12 @@ def test_killed_run_resumes_to_identical_files(tmp_path, render):
     ckpt = _killed_after_first_checkpoint(preset, tmp_path / "b")
     assert ckpt.exists(), "the run ended before its first checkpoint: nothing to resume"
     assert not (tmp_path / "b" / "cubes" / "manifest.json").exists()
+    assert (tmp_path / "b" / "cubes" / ".generate.geometry.npz").exists()
     r = generate(tmp_path / "b", preset=str(preset))
     assert r.returncode == 0 and "resuming at timestamp" in r.stdout
+    assert "from an earlier start" in r.stdout         # the geometry is not measured again
     assert _same_files(tmp_path / "a", tmp_path / "b") == []
+    assert not list((tmp_path / "b").rglob(".generate.*"))        # checkpoint and geometry removed when complete
 
 
 def test_a_checkpoint_whose_spool_is_lost_starts_over(tmp_path):
