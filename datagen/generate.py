@@ -143,7 +143,7 @@ class SceneJob:
         t_start = time.perf_counter()
         cams = R.build_scene(cfg, self.intr)
         t_blur = time.perf_counter()
-        cached = self.dir.is_dir() and geometry_cache.load(self.dir, self.fingerprint, self.jobs)
+        cached = geometry_cache.load(self.dir, self.fingerprint, self.jobs)     # False without a folder or file
         if cached:      # an earlier start measured it (15-27 min in a paper-preset room)
             print(f"{cfg.name}: blur exposures, dynamic masks and render schedule from an earlier start "
                   f"({geometry_cache.FILE_NAME})", flush=True)
