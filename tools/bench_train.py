@@ -19,8 +19,9 @@ so the intervals do not overlap), and the rest (SH colours, losses, event maps, 
 `--against REV` times a git revision's tree side by side: each tree runs in its own worker process
 (PYTHONPATH set to that tree) and the driver alternates single iterations between them, so machine
 stalls hit both alike and the speed-up ratio comes from one run. `--precisions` does the same with
-this tree under several `train.precision` values (one worker each; `auto` shows what it resolved to),
-so the deformation's dtypes are compared on one machine in one run; `--fields trajectory` adds a
+this tree's deformation MLP under several `train.precision` values (one worker each; `auto` shows what
+it resolved to; the precision is the MLP's, so these workers set `train.deform_field.kind: mlp`), so the
+MLP's dtypes are compared on one machine in one run; `--fields trajectory` adds a
 worker whose deformation is per-Gaussian trajectories (its time falls under "rest": the MLP columns
 time the MLP only); `--coarse 2 4` adds trajectory workers whose renders and targets are those of a
 coarse-to-fine stage at 1/2 and 1/4 resolution (train.coarse_to_fine). Medians throughout; the CPU
@@ -210,6 +211,18 @@ def worker(threads: int) -> None:
 
 
 # -- driver -----------------------------------------------------------------------------------------
+def worker_specs(precisions: list[str] | None, fields: list[str], coarse: list[int]) -> list[tuple[str, dict, int]]:
+    """(label, config overrides, render factor) of each worker on this tree, in the table's order.
+    train.precision is the deformation MLP's dtype (trajectories compute in float32 whatever it says) and
+    the configs' own field is the trajectory, so each precision worker times the MLP."""
+    specs = [(f"this tree, MLP, {p}", {"train.precision": p, "train.deform_field.kind": "mlp"}, 1)
+             for p in precisions] if precisions else [("this tree", {}, 1)]
+    specs += [(f"this tree, {f} field", {"train.deform_field.kind": f}, 1) for f in fields]
+    specs += [(f"this tree, trajectory field, 1/{f} resolution", {"train.deform_field.kind": "trajectory"}, f)
+              for f in coarse]
+    return specs
+
+
 class Tree:
     def __init__(self, label: str, root: Path, threads: int, overrides: dict | None = None, factor: int = 1):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
@@ -265,7 +278,7 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=1, help="torch and numba threads of each worker")
     ap.add_argument("--against", default=None, metavar="REV", help="also time this git revision's tree")
     ap.add_argument("--precisions", nargs="+", default=None, choices=["auto", "float32", "bfloat16"],
-                    help="time this tree once per train.precision value (default: the configs' own)")
+                    help="time this tree's deformation MLP once per train.precision value (default: the configs' own field)")
     ap.add_argument("--fields", nargs="+", default=[], choices=["mlp", "trajectory"],
                     help="also time this tree with train.deform_field.kind set to each of these")
     ap.add_argument("--coarse", nargs="+", type=int, default=[], metavar="FACTOR",
@@ -282,11 +295,8 @@ def main(argv=None) -> int:
     with contextlib.ExitStack() as stack:
         from common.machine import cpu_summary
 
-        trees = [Tree("this tree" + (f", {p}" if p else ""), REPO, args.threads, {"train.precision": p} if p else None)
-                 for p in (args.precisions or [None])]
-        trees += [Tree(f"this tree, {f} field", REPO, args.threads, {"train.deform_field.kind": f}) for f in args.fields]
-        trees += [Tree(f"this tree, trajectory field, 1/{f} resolution", REPO, args.threads,
-                       {"train.deform_field.kind": "trajectory"}, factor=f) for f in args.coarse]
+        trees = [Tree(label, REPO, args.threads, overrides, factor)
+                 for label, overrides, factor in worker_specs(args.precisions, args.fields, args.coarse)]
         if args.against:
             trees.append(Tree(args.against, stack.enter_context(checkout(args.against)), args.threads))
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "

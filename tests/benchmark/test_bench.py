@@ -491,3 +491,16 @@ def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():
     rest = [r for r in current if r.get("scene") != cfg.scenes[0]]
     kept, _ = current_rows(cfg, rest + first)
     assert [r.get("scene") for r in kept][:len(first)] == [cfg.scenes[0]] * len(first)
+
+
+def test_bench_train_times_the_mlp_at_each_precision_and_the_trajectories_beside_it():
+    """train.precision is the MLP's dtype: a precision worker that kept the configs' own field (the
+    trajectory, always float32) would time the same thing three times, as it once did."""
+    from tools.bench_train import worker_specs
+
+    specs = worker_specs(["auto", "float32", "bfloat16"], ["trajectory"], [2, 4])
+    assert [(o.get("train.precision"), o.get("train.deform_field.kind"), f) for _, o, f in specs] == [
+        ("auto", "mlp", 1), ("float32", "mlp", 1), ("bfloat16", "mlp", 1),
+        (None, "trajectory", 1), (None, "trajectory", 2), (None, "trajectory", 4)]
+    assert len({label for label, _, _ in specs}) == len(specs)
+    assert worker_specs(None, [], []) == [("this tree", {}, 1)]      # the configs' own field and precision
