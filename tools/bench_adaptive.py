@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
@@ -26,12 +24,11 @@ import yaml
 from common.machine import cpu_summary
 from common.imageio import read_png_linear
 from tools.bench_render_rate import nearest_time_errors
-from datagen.build import crashed
+from datagen.build import generate_dataset
 from datagen.config import PRESETS_DIR
 from simulator.h5io import read_events
 
-ROOT = Path(__file__).resolve().parent.parent
-RETRIES = 2           # restarts of a generator that died from a signal, as `e4dgs dataset --retries`
+RETRIES = 2           # restarts of a generator that died from a signal
 
 
 def generate(preset: Path, scene: str, extra: dict, out: Path) -> dict:
@@ -46,15 +43,10 @@ def generate(preset: Path, scene: str, extra: dict, out: Path) -> dict:
         s.pop("speeds", None)
     p = out.with_suffix(".yaml")
     p.write_text(yaml.safe_dump(data))
-    cmd = [sys.executable, "-m", "datagen.generate", "--scene", scene, "--preset", str(p), "--out", str(out), "--no-progress"]
-    for attempt in range(RETRIES + 1):
-        r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
-        if not (crashed(r.returncode) and attempt < RETRIES):
-            break
-        # Blender's renderer sometimes corrupts its heap on long clips (SIGABRT): go on from the checkpoint
-        print(f"{scene}: the generator crashed (signal {-r.returncode}); resuming from its checkpoint", flush=True)
-    if r.returncode != 0:
-        raise SystemExit(f"{scene}: generation failed:\n{r.stderr[-2000:]}")
+    # a generator killed by a signal (Blender's renderer sometimes corrupts its heap on long clips)
+    # is started again and resumes from its checkpoint, as `e4dgs dataset --retries` does
+    if generate_dataset(p, [scene], out, retries=RETRIES, log=lambda msg: print(msg, flush=True)):
+        raise SystemExit(f"{scene}: generation failed (the generator's messages are above)")
     return json.loads((out / scene / "manifest.json").read_text())
 
 
