@@ -11,6 +11,7 @@ import torch
 
 from recon.raster import cpu_project as P
 from recon.raster import cpu_raster as K
+from recon.raster import cpu_raster_backward as KB
 
 
 def _np(t: torch.Tensor) -> np.ndarray:
@@ -66,7 +67,7 @@ class _Rasterize(torch.autograd.Function):
         N, C = col.shape
         order = np.argsort(dep, kind="stable").astype(np.int64)
         boxes, consts = K.footprints(m2d, con, rad, op, width, height)
-        counts, lists = K.bin_tiles(boxes, order, width, height)
+        counts, lists, row_offsets = K.bin_tiles(boxes, order, width, height)
         image = np.empty((height, width, C), dtype)
         alpha = np.empty((height, width), dtype)
         depth = np.empty((height, width), dtype)
@@ -75,10 +76,14 @@ class _Rasterize(torch.autograd.Function):
         threads = numba.get_num_threads()
         max_w = np.zeros((threads, N), dtype)
         col, bg = col.astype(dtype, copy=False), bg.astype(dtype, copy=False)
+        n_rows = row_offsets[-1]
+        row_span = np.empty((n_rows, 2), np.int32)     # the forward's row scans, for the backward
+        row_start = np.empty((n_rows, 2), np.float64)
         K.raster_forward(m2d, con, dep, boxes, consts, op, col, bg, width, height,
-                         counts, lists, image, alpha, depth, final_t, n_contrib, max_w)
+                         counts, lists, row_offsets, image, alpha, depth, final_t, n_contrib, max_w,
+                         row_span, row_start)
         ctx.save_for_backward(means2d, conics, depths, opacities, colors, background)
-        ctx.state = (boxes, consts, counts, lists, final_t, n_contrib, width, height)
+        ctx.state = (boxes, consts, counts, lists, row_offsets, row_span, row_start, final_t, n_contrib, width, height)
         max_w_t = torch.from_numpy(max_w.max(axis=0) if N else np.zeros(0, dtype))
         ctx.mark_non_differentiable(max_w_t)
         return torch.from_numpy(image), torch.from_numpy(alpha), torch.from_numpy(depth), max_w_t
@@ -86,7 +91,7 @@ class _Rasterize(torch.autograd.Function):
     @staticmethod
     def backward(ctx, g_image, g_alpha, g_depth, _g_max_w):
         means2d, conics, depths, opacities, colors, background = ctx.saved_tensors
-        boxes, consts, counts, lists, final_t, n_contrib, width, height = ctx.state
+        boxes, consts, counts, lists, row_offsets, row_span, row_start, final_t, n_contrib, width, height = ctx.state
         m2d, con, dep, op, col, bg = (_np(x) for x in (means2d, conics, depths, opacities, colors, background))
         dtype = m2d.dtype
         N, C = col.shape
@@ -98,8 +103,8 @@ class _Rasterize(torch.autograd.Function):
         g_col = np.zeros((threads, N, C), dtype)
         g_bg = np.zeros((threads, C), dtype)
         col, bg = col.astype(dtype, copy=False), bg.astype(dtype, copy=False)
-        K.raster_backward(m2d, con, dep, boxes, consts, op, col, bg, width, height,
-                          counts, lists, final_t, n_contrib, _np(g_image).astype(dtype, copy=False),
+        KB.raster_backward(m2d, con, dep, boxes, consts, op, col, bg, width, height,
+                          counts, lists, row_offsets, row_span, row_start, final_t, n_contrib, _np(g_image).astype(dtype, copy=False),
                           _np(g_alpha).astype(dtype, copy=False), _np(g_depth).astype(dtype, copy=False),
                           g_m2d, g_con, g_dep, g_op, g_col, g_bg)
         out = [torch.from_numpy(x.sum(axis=0)) for x in (g_m2d, g_con, g_dep, g_op, g_col, g_bg)]

@@ -1,4 +1,4 @@
-"""Numba kernels of the tile-binned rasterizer, forward and hand-written backward.
+"""Numba kernels of the tile-binned rasterizer: set-up and forward (the backward: `cpu_raster_backward`).
 
 Same semantics as `rasterize_ref.py` (per-pixel footprint square, alpha skip and cap, stop before T < 1e-4),
 organised for speed:
@@ -10,11 +10,14 @@ organised for speed:
   where its alpha can reach 1/255 (the roots of a quadratic, widened by a pixel and then tested
   exactly per pixel, so the result is the same as testing every pixel); rows whose pixels have all
   stopped (transmittance below T_MIN) are skipped without computing their span;
+- exp(power) along a row by recurrence (two multiplications per pixel), and the start of each row
+  from the previous row's by a cursor moved with constant factors (`_cursor_start`): about one
+  exp per (tile, Gaussian) instead of two per row, the factors in float64 whatever the inputs;
+- the forward keeps each row's columns and start values (the row store, ~24 bytes a row), so the
+  backward sets up no row and sees bit for bit the alphas the forward saw;
+- the per-row loops are specialised by channel count (`C` a literal at each call site);
 - per-thread buffers for max_weight and gradients, reduced at the end (no atomics);
 - one to three colour channels (colours and gradients as scalars in registers, no channel loop).
-The backward visits each tile's Gaussians back to front with the same row intervals and runs the
-standard reverse compositing recurrence per pixel, skipping rows where every pixel stopped before
-the current Gaussian.
 """
 from __future__ import annotations
 
@@ -28,6 +31,9 @@ from recon.raster.types import ALPHA_MAX, ALPHA_MIN, T_MIN
 # Tiles of this backend (its results do not depend on them): wide, so a small Gaussian straddles fewer
 # tiles (each straddle repeats its row set-up), and short enough to give 2 threads ~190 tiles to share.
 TILE_W, TILE_H = 32, 16
+# A row's start follows from the previous row's by moving the cursor at most this many columns;
+# further (or after a skipped row) it is computed afresh with exps.
+MAX_SHIFT = 3
 
 _opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
 
@@ -49,21 +55,25 @@ def footprints(means2d, conics, radii, opacities, width, height):
     (Q the conic) outside which alpha = o exp(-d^T Q d / 2) < 1/255. The ellipse's half-widths are
     sqrt(k (Q^-1)_xx) and sqrt(k (Q^-1)_yy), widened by 1e-3 px against rounding.
 
-    Also returns the row scan's constants [N, 4] (k1, k2, 1/a, exp(-a): see `_gaussian_setup`), so
-    the tiles do not recompute a log and an exp per Gaussian each; k serves both.
+    Also returns the row scan's constants [N, 8] (k1, k2, 1/a, exp(-a): see `_gaussian_setup`; the
+    cursor's exp(a), exp(-b), exp(b), exp(-c): see `_cursor_start`), so the tiles do not recompute
+    a log and exps per Gaussian each; k serves both.
     """
     n = means2d.shape[0]
     boxes = np.empty((n, 4), np.int64)
-    consts = np.zeros((n, 4), np.float64)
+    consts = np.zeros((n, 8), np.float64)
     for g in numba.prange(n):
         boxes[g, 0], boxes[g, 1], boxes[g, 2], boxes[g, 3] = 1, 0, 1, 0
-        op, a, b, c = opacities[g], conics[g, 0], conics[g, 1], conics[g, 2]
+        # in float64 whatever the inputs' dtype: the row and cursor recurrences multiply these factors
+        op, a, b, c = (np.float64(opacities[g]), np.float64(conics[g, 0]), np.float64(conics[g, 1]),
+                       np.float64(conics[g, 2]))
         r = float(radii[g])
         if radii[g] <= 0 or not (op >= ALPHA_MIN and a > 0.0):
             continue
         k = 2.0 * math.log(op / ALPHA_MIN)
         consts[g, 0], consts[g, 1], consts[g, 2] = _gaussian_setup(a, b, c, k)
         consts[g, 3] = math.exp(-a)
+        consts[g, 4], consts[g, 5], consts[g, 6], consts[g, 7] = math.exp(a), math.exp(-b), math.exp(b), math.exp(-c)
         hx = hy = r
         det = a * c - b * b
         if det > 0.0:
@@ -89,7 +99,9 @@ def _tile_range(g, boxes):
 
 @numba.njit(**_opts)
 def bin_tiles(boxes, order, width, height):
-    """CSR tile lists: Gaussians whose pixel box overlaps each tile, in `order` (front to back)."""
+    """CSR tile lists: Gaussians whose pixel box overlaps each tile, in `order` (front to back), and
+    for each list entry k the first of its rows in the row store (row_offsets [len(lists) + 1]):
+    one row per pixel row of the Gaussian's box within the tile."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     tiles_y = (height + TILE_H - 1) // TILE_H
     counts = np.zeros(tiles_x * tiles_y + 1, np.int64)
@@ -109,7 +121,16 @@ def bin_tiles(boxes, order, width, height):
                 t = ty * tiles_x + tx
                 lists[fill[t]] = g
                 fill[t] += 1
-    return counts, lists
+    # rows of each (tile, Gaussian) pair in the row store the forward fills and the backward reads
+    row_offsets = np.empty(counts[-1] + 1, np.int64)
+    row_offsets[0] = 0
+    for t in range(tiles_x * tiles_y):
+        y0 = (t // tiles_x) * TILE_H
+        y1 = min(y0 + TILE_H, height) - 1
+        for k in range(counts[t], counts[t + 1]):
+            g = lists[k]
+            row_offsets[k + 1] = row_offsets[k] + min(y1, boxes[g, 3]) - max(y0, boxes[g, 2]) + 1
+    return counts, lists, row_offsets
 
 
 @numba.njit(**_opts)
@@ -140,6 +161,22 @@ def _row_start(lo, mx, dy, a, b, c):
 
 
 @numba.njit(**_opts)
+def _cursor_start(lo, mx, dy, a, b, c):
+    """exp(power) at column lo of a row, its ratio to the next column and to the same column of the
+    next row: G(dx, dy + 1) / G(dx, dy) = exp(-c dy - c / 2 - b dx).
+
+    Moving the cursor a row down multiplies G by that ratio, the ratio by exp(-c) and the column
+    ratio by exp(-b); a column right multiplies G by the column ratio, that by exp(-a) and the row
+    ratio by exp(-b) (left: the inverses). Each ratio stays within exp(+-|Q d| - 3.4) of one near
+    the ellipse (|Q| <= 1 / LOWPASS), so nothing underflows on the cursor's short moves, and the
+    drift is ~1e-16 relative per multiplication.
+    """
+    dx = lo + 0.5 - mx
+    G, step = _row_start(lo, mx, dy, a, b, c)
+    return G, step, math.exp(-c * dy - 0.5 * c - b * dx)
+
+
+@numba.njit(**_opts)
 def _colour3(colors, g, C):
     """Gaussian g's colour as three scalars (channels >= C are zero): the kernels handle 1-3 channels."""
     return colors[g, 0], colors[g, 1] if C > 1 else 0.0, colors[g, 2] if C > 2 else 0.0
@@ -165,9 +202,46 @@ def _gaussian_in_tile(g, means2d, conics, boxes, consts, opacities, y0, y1):
             boxes[g, 0], boxes[g, 1], consts[g, 0], consts[g, 1], consts[g, 2], consts[g, 3], vlo, vhi)
 
 
+@numba.njit(inline="always", **_opts)
+def _blend_row(C, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, idx, T, acc, dep, last, done, wmax):
+    """Composite one Gaussian over the pixels [lo, hi] of a row (flat index base + u). C is a literal
+    at each call site, so the channels it lacks cost nothing. Returns the largest weight and the
+    number of pixels that stopped."""
+    n_stopped = 0
+    for u in range(lo, hi + 1):
+        p = base + u
+        g_here = G
+        G *= step        # exp(power) along the row by recurrence: no exp per pixel
+        step *= q
+        if done[p]:
+            continue
+        al = min(ALPHA_MAX, op * g_here)
+        if al < ALPHA_MIN:
+            continue
+        test_t = T[p] * (1.0 - al)
+        if test_t < T_MIN:
+            done[p] = True
+            n_stopped += 1
+            continue
+        w = al * T[p]
+        acc[0, p] += w * cg0
+        if C > 1:
+            acc[1, p] += w * cg1
+        if C > 2:
+            acc[2, p] += w * cg2
+        dep[p] += w * dg
+        T[p] = test_t
+        last[p] = idx
+        wmax = max(wmax, w)      # branch-free: the comparison is unpredictable
+    return wmax, n_stopped
+
+
 @numba.njit(parallel=True, **_opts)
 def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, background, width, height,
-                   counts, lists, image, alpha_img, depth_img, final_t, n_contrib, max_w_thread):
+                   counts, lists, row_offsets, image, alpha_img, depth_img, final_t, n_contrib, max_w_thread,
+                   row_span, row_start):
+    """Also fills the row store for the backward: for each row it scans, the columns [lo, hi]
+    (row_span [R, 2]) and exp(power) at lo with its ratio to the next column (row_start [R, 2])."""
     tiles_x = (width + TILE_W - 1) // TILE_W
     n_tiles = counts.shape[0] - 1
     C = colors.shape[1]
@@ -188,40 +262,56 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
             g = lists[k]
             mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
                 g, means2d, conics, boxes, consts, opacities, y0, y1)
+            inv_q, eb, inv_eb, ec = consts[g, 4], consts[g, 5], consts[g, 6], consts[g, 7]
             cg0, cg1, cg2 = _colour3(colors, g, C)
             dg = depths[g]
             wmax = 0.0
+            r0 = row_offsets[k] - vlo
+            # exp(power) at the start of each row follows from the previous row's: a cursor at (cu, cv)
+            # carries G, its ratio to the next column (step) and to the next row (down), each updated by
+            # constant factors as it moves (see `_cursor_start`); fresh exps only where rows do not follow
+            cv = -2
+            cu = 0
+            G = step = down = 0.0
             for v in range(vlo, vhi + 1):
                 if row_live[v - y0] == 0:
                     continue
                 dy = v + 0.5 - my
                 lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
-                G, step = _row_start(lo, mx, dy, a, b, c)
+                row_span[r0 + v, 0], row_span[r0 + v, 1] = lo, hi
+                if lo > hi:
+                    continue
+                if cv == v - 1 and abs(lo - cu) <= MAX_SHIFT:
+                    G *= down
+                    down *= ec
+                    step *= eb
+                    while cu < lo:
+                        G *= step
+                        step *= q
+                        down *= eb
+                        cu += 1
+                    while cu > lo:
+                        step *= inv_q
+                        G /= step
+                        down *= inv_eb
+                        cu -= 1
+                else:
+                    G, step, down = _cursor_start(lo, mx, dy, a, b, c)
+                    cu = lo
+                cv = v
+                row_start[r0 + v, 0], row_start[r0 + v, 1] = G, step
                 base = (v - y0) * tw - x0
-                for u in range(lo, hi + 1):
-                    p = base + u
-                    g_here = G
-                    G *= step        # exp(power) along the row by recurrence: no exp per pixel
-                    step *= q
-                    if done[p]:
-                        continue
-                    al = min(ALPHA_MAX, op * g_here)
-                    if al < ALPHA_MIN:
-                        continue
-                    test_t = T[p] * (1.0 - al)
-                    if test_t < T_MIN:
-                        done[p] = True
-                        n_done += 1
-                        row_live[v - y0] -= 1
-                        continue
-                    w = al * T[p]
-                    acc[0, p] += w * cg0
-                    acc[1, p] += w * cg1
-                    acc[2, p] += w * cg2
-                    dep[p] += w * dg
-                    T[p] = test_t
-                    last[p] = k - start + 1
-                    wmax = max(wmax, w)      # branch-free: the comparison is unpredictable
+                if C == 1:
+                    wmax, n_stopped = _blend_row(1, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, k - start + 1,
+                                                 T, acc, dep, last, done, wmax)
+                elif C == 2:
+                    wmax, n_stopped = _blend_row(2, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, k - start + 1,
+                                                 T, acc, dep, last, done, wmax)
+                else:
+                    wmax, n_stopped = _blend_row(3, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, k - start + 1,
+                                                 T, acc, dep, last, done, wmax)
+                n_done += n_stopped
+                row_live[v - y0] -= n_stopped
             if wmax > max_w_thread[tid, g]:
                 max_w_thread[tid, g] = wmax
         for v in range(y0, y1 + 1):
@@ -233,108 +323,3 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
                 depth_img[v, u] = dep[p]
                 final_t[v, u] = T[p]
                 n_contrib[v, u] = last[p]
-
-
-@numba.njit(parallel=True, **_opts)
-def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, background, width, height,
-                    counts, lists, final_t, n_contrib, g_image, g_alpha, g_depth,
-                    g_m2d, g_con, g_dep, g_op, g_col, g_bg):
-    """Per-thread gradient buffers g_* [threads, N, ...] and g_bg [threads, C] are accumulated into."""
-    tiles_x = (width + TILE_W - 1) // TILE_W
-    n_tiles = counts.shape[0] - 1
-    C = colors.shape[1]
-    for tile in numba.prange(n_tiles):
-        tid = numba.get_thread_id()
-        x0, x1, y0, y1, tw, npx = _tile_box(tile, tiles_x, width, height)
-        T = np.empty(npx)
-        last = np.empty(npx, np.int64)
-        # Colour and depth composited behind the current Gaussian enter the gradient only through their
-        # dot product with the pixel's (fixed) image and depth gradient, and that dot product follows the
-        # same linear recurrence: S = a_prev * H_prev + (1 - a_prev) * S, with H = colour . dL/dimage +
-        # depth * dL/ddepth of a contributor. So a pixel's state is a few scalars, whatever C.
-        S = np.zeros(npx)
-        H_prev = np.zeros(npx)
-        last_a = np.zeros(npx)
-        max_last = 0
-        row_last = np.zeros(y1 - y0 + 1, np.int64)   # per row: the largest last contributor + 1
-        gimg = np.zeros((3, npx))      # the tile's image gradient planes (channels >= C stay zero)
-        gdpx = np.empty(npx)           # depth gradient
-        gfin = np.empty(npx)           # (dL/dalpha - background . dL/dimage) x final transmittance
-        for v in range(y0, y1 + 1):
-            for u in range(x0, x1 + 1):
-                p = (v - y0) * tw + (u - x0)
-                T[p] = final_t[v, u]
-                last[p] = n_contrib[v, u]
-                row_last[v - y0] = max(row_last[v - y0], last[p])
-                max_last = max(max_last, last[p])
-                bg_dot = 0.0
-                for ch in range(C):
-                    gimg[ch, p] = g_image[v, u, ch]
-                    g_bg[tid, ch] += final_t[v, u] * g_image[v, u, ch]
-                    bg_dot += background[ch] * g_image[v, u, ch]
-                gdpx[p] = g_depth[v, u]
-                gfin[p] = (g_alpha[v, u] - bg_dot) * final_t[v, u]
-        start = counts[tile]
-        for k in range(start + max_last - 1, start - 1, -1):
-            g = lists[k]
-            idx = k - start
-            mx, my, a, b, c, op, u_lo, u_hi, k1, k2, inv_a, q, vlo, vhi = _gaussian_in_tile(
-                g, means2d, conics, boxes, consts, opacities, y0, y1)
-            cg0, cg1, cg2 = _colour3(colors, g, C)
-            dg = depths[g]
-            # this Gaussian's gradient over the tile, summed locally and stored once
-            gdep = gop = gmx = gmy = gca = gcb = gcc = gc0 = gc1 = gc2 = 0.0
-            for v in range(vlo, vhi + 1):
-                if idx >= row_last[v - y0]:
-                    continue
-                dy = v + 0.5 - my
-                lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
-                G_next, step = _row_start(lo, mx, dy, a, b, c)
-                base = (v - y0) * tw - x0
-                for u in range(lo, hi + 1):
-                    p = base + u
-                    G = G_next
-                    G_next *= step
-                    step *= q
-                    if idx >= last[p]:
-                        continue
-                    al = min(ALPHA_MAX, op * G)
-                    if al < ALPHA_MIN:
-                        continue
-                    inv_keep = 1.0 / (1.0 - al)
-                    Tp = T[p] * inv_keep               # transmittance in front of g
-                    T[p] = Tp
-                    wgt = al * Tp
-                    la = last_a[p]
-                    S[p] = la * H_prev[p] + (1.0 - la) * S[p]
-                    g0, g1, g2, gd = gimg[0, p], gimg[1, p], gimg[2, p], gdpx[p]
-                    here = cg0 * g0 + cg1 * g1 + cg2 * g2 + dg * gd
-                    H_prev[p] = here
-                    last_a[p] = al
-                    dl_dal = (here - S[p]) * Tp + gfin[p] * inv_keep
-                    gc0 += wgt * g0
-                    gc1 += wgt * g1
-                    gc2 += wgt * g2
-                    gdep += wgt * gd
-                    if op * G > ALPHA_MAX:
-                        continue                       # alpha is capped: no gradient to opacity or shape
-                    dx = u + 0.5 - mx
-                    gop += G * dl_dal
-                    dl_dpow = op * G * dl_dal
-                    gmx += dl_dpow * (a * dx + b * dy)
-                    gmy += dl_dpow * (c * dy + b * dx)
-                    gca += dl_dpow * (-0.5 * dx * dx)
-                    gcb += dl_dpow * (-dx * dy)
-                    gcc += dl_dpow * (-0.5 * dy * dy)
-            g_col[tid, g, 0] += gc0
-            if C > 1:
-                g_col[tid, g, 1] += gc1
-            if C > 2:
-                g_col[tid, g, 2] += gc2
-            g_dep[tid, g] += gdep
-            g_op[tid, g] += gop
-            g_m2d[tid, g, 0] += gmx
-            g_m2d[tid, g, 1] += gmy
-            g_con[tid, g, 0] += gca
-            g_con[tid, g, 1] += gcb
-            g_con[tid, g, 2] += gcc
