@@ -35,7 +35,7 @@ TILE_W, TILE_H = 32, 16
 # further (or after a skipped row) it is computed afresh with exps.
 MAX_SHIFT = 3
 
-_opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
+_opts = dict(cache=True, nogil=True, fastmath={"contract"}, error_model="numpy")
 
 
 @numba.njit(**_opts)
@@ -147,6 +147,20 @@ def _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1):
     return lo, hi
 
 
+@numba.njit(inline="always", **_opts)
+def _row_spans(i0, i1, dy0, mx, b, k1, k2, inv_a, u_lo, u_hi, x0, x1, span_lo, span_hi):
+    """`_row_span` of the rows i0..i1 of a tile (dy0: row 0's offset from the centre) into span_lo /
+    span_hi, branch-free so that the loop vectorises (empty rows: lo > hi)."""
+    for i in range(i0, i1 + 1):
+        dy = dy0 + i
+        disc = k1 * dy * dy + k2
+        sq = math.sqrt(max(disc, 0.0))
+        lo = max(int(math.floor(mx + (-b * dy - sq) * inv_a - 0.5)) - 1, u_lo, x0)
+        hi = min(int(math.ceil(mx + (-b * dy + sq) * inv_a - 0.5)) + 1, u_hi, x1)
+        span_lo[i] = lo
+        span_hi[i] = hi if disc >= 0.0 else lo - 1
+
+
 @numba.njit(**_opts)
 def _row_start(lo, mx, dy, a, b, c):
     """exp(power) at column lo of a row and its ratio to the next column.
@@ -254,6 +268,8 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
         last = np.zeros(npx, np.int64)
         done = np.zeros(npx, np.bool_)
         row_live = np.full(y1 - y0 + 1, tw)   # pixels of each row still compositing
+        span_lo = np.empty(TILE_H, np.int64)  # the current Gaussian's row spans in this tile
+        span_hi = np.empty(TILE_H, np.int64)
         n_done = 0
         start, stop = counts[tile], counts[tile + 1]
         for k in range(start, stop):
@@ -273,11 +289,12 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
             cv = -2
             cu = 0
             G = step = down = 0.0
+            _row_spans(vlo - y0, vhi - y0, y0 + 0.5 - my, mx, b, k1, k2, inv_a, u_lo, u_hi, x0, x1, span_lo, span_hi)
             for v in range(vlo, vhi + 1):
                 if row_live[v - y0] == 0:
                     continue
                 dy = v + 0.5 - my
-                lo, hi = _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1)
+                lo, hi = span_lo[v - y0], span_hi[v - y0]
                 row_span[r0 + v, 0], row_span[r0 + v, 1] = lo, hi
                 if lo > hi:
                     continue

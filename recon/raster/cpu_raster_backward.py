@@ -16,7 +16,7 @@ from recon.raster.types import ALPHA_MAX, ALPHA_MIN
 
 @numba.njit(inline="always", **_opts)
 def _grad_row(C, lo, hi, base, G_next, step, q, idx, op, dx, cg0, cg1, cg2, dg,
-              T, last, S, H_prev, last_a, gimg, gdpx, gfin):
+              T, last, S, gimg, gdpx, gfin):
     """The reverse compositing recurrence of one Gaussian over the pixels [lo, hi] of a row (dx: the
     column offset of lo from its centre). Returns its sums over the row: colour (3), depth and
     opacity gradients, and the moments sum(d), sum(d dx), sum(d dx^2) of d = dL/dpower, from
@@ -38,8 +38,6 @@ def _grad_row(C, lo, hi, base, G_next, step, q, idx, op, dx, cg0, cg1, cg2, dg,
         Tp = T[p] * inv_keep               # transmittance in front of g
         T[p] = Tp
         wgt = al * Tp
-        la = last_a[p]
-        S[p] = la * H_prev[p] + (1.0 - la) * S[p]
         g0, gd = gimg[0, p], gdpx[p]
         here = cg0 * g0 + dg * gd
         r_c0 += wgt * g0
@@ -51,9 +49,9 @@ def _grad_row(C, lo, hi, base, G_next, step, q, idx, op, dx, cg0, cg1, cg2, dg,
             g2 = gimg[2, p]
             here += cg2 * g2
             r_c2 += wgt * g2
-        H_prev[p] = here
-        last_a[p] = al
-        dl_dal = (here - S[p]) * Tp + gfin[p] * inv_keep
+        behind = S[p]
+        S[p] = behind + al * (here - behind)      # what lies behind the next Gaussian in front
+        dl_dal = (here - behind) * Tp + gfin[p] * inv_keep
         r_dep += wgt * gd
         if op * G > ALPHA_MAX:
             continue                       # alpha is capped: no gradient to opacity or shape
@@ -82,11 +80,10 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
         last = np.empty(npx, np.int64)
         # Colour and depth composited behind the current Gaussian enter the gradient only through their
         # dot product with the pixel's (fixed) image and depth gradient, and that dot product follows the
-        # same linear recurrence: S = a_prev * H_prev + (1 - a_prev) * S, with H = colour . dL/dimage +
-        # depth * dL/ddepth of a contributor. So a pixel's state is a few scalars, whatever C.
+        # same linear recurrence, updated as each contributor is passed (back to front):
+        # S <- alpha H + (1 - alpha) S, with H = colour . dL/dimage + depth * dL/ddepth of that
+        # contributor. So a pixel's state is a few scalars, whatever C.
         S = np.zeros(npx)
-        H_prev = np.zeros(npx)
-        last_a = np.zeros(npx)
         max_last = 0
         row_last = np.zeros(y1 - y0 + 1, np.int64)   # per row: the largest last contributor + 1
         gimg = np.zeros((3, npx))      # the tile's image gradient planes (channels >= C stay zero)
@@ -129,13 +126,13 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
                 G0, step = row_start[r0 + v, 0], row_start[r0 + v, 1]
                 if C == 1:
                     sums = _grad_row(1, lo, hi, base, G0, step, q, idx, op, lo + 0.5 - mx, cg0, cg1, cg2, dg,
-                                     T, last, S, H_prev, last_a, gimg, gdpx, gfin)
+                                     T, last, S, gimg, gdpx, gfin)
                 elif C == 2:
                     sums = _grad_row(2, lo, hi, base, G0, step, q, idx, op, lo + 0.5 - mx, cg0, cg1, cg2, dg,
-                                     T, last, S, H_prev, last_a, gimg, gdpx, gfin)
+                                     T, last, S, gimg, gdpx, gfin)
                 else:
                     sums = _grad_row(3, lo, hi, base, G0, step, q, idx, op, lo + 0.5 - mx, cg0, cg1, cg2, dg,
-                                     T, last, S, H_prev, last_a, gimg, gdpx, gfin)
+                                     T, last, S, gimg, gdpx, gfin)
                 r_c0, r_c1, r_c2, r_dep, r_op, s0, s1, s2 = sums
                 gc0 += r_c0
                 gc1 += r_c1
