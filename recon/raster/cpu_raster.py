@@ -15,7 +15,7 @@ organised for speed:
   exp per (tile, Gaussian) instead of two per row, the factors in float64 whatever the inputs;
 - the forward keeps each row's columns and start values (the row store, ~24 bytes a row), so the
   backward sets up no row and sees bit for bit the alphas the forward saw;
-- the per-row loops are specialised by channel count (`C` a literal at each call site);
+- the per-row loops are specialised for one channel (`C` a literal at each call site);
 - per-thread buffers for max_weight and gradients, reduced at the end (no atomics);
 - one to three colour channels (colours and gradients as scalars in registers, no channel loop).
 """
@@ -98,6 +98,13 @@ def _tile_range(g, boxes):
 
 
 @numba.njit(**_opts)
+def _rows_in_tile(g, boxes, y0, y1):
+    """Rows [vlo, vhi] of Gaussian g's pixel box within a tile's rows [y0, y1]: the rows the row
+    store holds for the pair (the offsets of `bin_tiles` and both kernels' indices agree on it)."""
+    return max(y0, boxes[g, 2]), min(y1, boxes[g, 3])
+
+
+@numba.njit(**_opts)
 def bin_tiles(boxes, order, width, height):
     """CSR tile lists: Gaussians whose pixel box overlaps each tile, in `order` (front to back), and
     for each list entry k the first of its rows in the row store (row_offsets [len(lists) + 1]):
@@ -128,29 +135,17 @@ def bin_tiles(boxes, order, width, height):
         y0 = (t // tiles_x) * TILE_H
         y1 = min(y0 + TILE_H, height) - 1
         for k in range(counts[t], counts[t + 1]):
-            g = lists[k]
-            row_offsets[k + 1] = row_offsets[k] + min(y1, boxes[g, 3]) - max(y0, boxes[g, 2]) + 1
+            vlo, vhi = _rows_in_tile(lists[k], boxes, y0, y1)
+            row_offsets[k + 1] = row_offsets[k] + vhi - vlo + 1
     return counts, lists, row_offsets
-
-
-@numba.njit(**_opts)
-def _row_span(mx, dy, b, k1, k2, inv_a, u_lo, u_hi, x0, x1):
-    """Columns [lo, hi] of a row (offset dy from the centre) where alpha may reach 1/255: the roots
-    of the quadratic widened by a pixel (every pixel is then tested exactly), within the pixel box's
-    columns and the tile."""
-    disc = k1 * dy * dy + k2
-    if disc < 0.0:
-        return 1, 0
-    sq = math.sqrt(disc)
-    lo = max(int(math.floor(mx + (-b * dy - sq) * inv_a - 0.5)) - 1, u_lo, x0)
-    hi = min(int(math.ceil(mx + (-b * dy + sq) * inv_a - 0.5)) + 1, u_hi, x1)
-    return lo, hi
 
 
 @numba.njit(inline="always", **_opts)
 def _row_spans(i0, i1, dy0, mx, b, k1, k2, inv_a, u_lo, u_hi, x0, x1, span_lo, span_hi):
-    """`_row_span` of the rows i0..i1 of a tile (dy0: row 0's offset from the centre) into span_lo /
-    span_hi, branch-free so that the loop vectorises (empty rows: lo > hi)."""
+    """Columns [lo, hi] of the rows i0..i1 of a tile (dy0: row 0's offset from the centre) where alpha
+    may reach 1/255, into span_lo / span_hi: the roots of the quadratic widened by a pixel (every
+    pixel is then tested exactly), within the pixel box's columns and the tile; lo > hi for an
+    empty row. Branch-free, so that the loop vectorises."""
     for i in range(i0, i1 + 1):
         dy = dy0 + i
         disc = k1 * dy * dy + k2
@@ -210,8 +205,7 @@ def _tile_box(tile, tiles_x, width, height):
 def _gaussian_in_tile(g, means2d, conics, boxes, consts, opacities, y0, y1):
     """Everything the row scan of Gaussian g over a tile's rows [y0, y1] needs (binned Gaussians
     only: their alpha can reach 1/255 somewhere)."""
-    vlo = max(y0, boxes[g, 2])
-    vhi = min(y1, boxes[g, 3])
+    vlo, vhi = _rows_in_tile(g, boxes, y0, y1)
     return (means2d[g, 0], means2d[g, 1], conics[g, 0], conics[g, 1], conics[g, 2], opacities[g],
             boxes[g, 0], boxes[g, 1], consts[g, 0], consts[g, 1], consts[g, 2], consts[g, 3], vlo, vhi)
 
@@ -219,7 +213,8 @@ def _gaussian_in_tile(g, means2d, conics, boxes, consts, opacities, y0, y1):
 @numba.njit(inline="always", **_opts)
 def _blend_row(C, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, idx, T, acc, dep, last, done, wmax):
     """Composite one Gaussian over the pixels [lo, hi] of a row (flat index base + u). C is a literal
-    at each call site, so the channels it lacks cost nothing. Returns the largest weight and the
+    at each call site (1, or 3 for two and three channels: a missing colour is zero), so the one-
+    channel models skip two colour planes. Returns the largest weight and the
     number of pixels that stopped."""
     n_stopped = 0
     for u in range(lo, hi + 1):
@@ -320,9 +315,6 @@ def raster_forward(means2d, conics, depths, boxes, consts, opacities, colors, ba
                 base = (v - y0) * tw - x0
                 if C == 1:
                     wmax, n_stopped = _blend_row(1, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, k - start + 1,
-                                                 T, acc, dep, last, done, wmax)
-                elif C == 2:
-                    wmax, n_stopped = _blend_row(2, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, k - start + 1,
                                                  T, acc, dep, last, done, wmax)
                 else:
                     wmax, n_stopped = _blend_row(3, lo, hi, base, G, step, q, op, cg0, cg1, cg2, dg, k - start + 1,

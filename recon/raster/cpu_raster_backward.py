@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from recon.raster.cpu_raster import TILE_W, _colour3, _opts, _tile_box
+from recon.raster.cpu_raster import TILE_W, _colour3, _opts, _rows_in_tile, _tile_box
 from recon.raster.types import ALPHA_MAX, ALPHA_MIN
 
 
@@ -20,7 +20,8 @@ def _grad_row(C, lo, hi, base, G_next, step, q, idx, op, dx, cg0, cg1, cg2, dg,
     """The reverse compositing recurrence of one Gaussian over the pixels [lo, hi] of a row (dx: the
     column offset of lo from its centre). Returns its sums over the row: colour (3), depth and
     opacity gradients, and the moments sum(d), sum(d dx), sum(d dx^2) of d = dL/dpower, from
-    which the caller forms the mean and conic gradients. C is a literal at each call site."""
+    which the caller forms the mean and conic gradients. C is a literal at each call site (1 or 3;
+    two channels take the three-channel path, the third colour and image gradient being zero)."""
     r_c0 = r_c1 = r_c2 = r_dep = r_op = s0 = s1 = s2 = 0.0
     for u in range(lo, hi + 1):
         p = base + u
@@ -109,7 +110,7 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
             idx = k - start
             mx, my, a, b, c, op = means2d[g, 0], means2d[g, 1], conics[g, 0], conics[g, 1], conics[g, 2], opacities[g]
             q = consts[g, 3]
-            vlo, vhi = max(y0, boxes[g, 2]), min(y1, boxes[g, 3])
+            vlo, vhi = _rows_in_tile(g, boxes, y0, y1)
             cg0, cg1, cg2 = _colour3(colors, g, C)
             dg = depths[g]
             # this Gaussian's gradient over the tile, summed locally and stored once
@@ -126,9 +127,6 @@ def raster_backward(means2d, conics, depths, boxes, consts, opacities, colors, b
                 G0, step = row_start[r0 + v, 0], row_start[r0 + v, 1]
                 if C == 1:
                     sums = _grad_row(1, lo, hi, base, G0, step, q, idx, op, lo + 0.5 - mx, cg0, cg1, cg2, dg,
-                                     T, last, S, gimg, gdpx, gfin)
-                elif C == 2:
-                    sums = _grad_row(2, lo, hi, base, G0, step, q, idx, op, lo + 0.5 - mx, cg0, cg1, cg2, dg,
                                      T, last, S, gimg, gdpx, gfin)
                 else:
                     sums = _grad_row(3, lo, hi, base, G0, step, q, idx, op, lo + 0.5 - mx, cg0, cg1, cg2, dg,

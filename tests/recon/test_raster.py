@@ -107,7 +107,7 @@ def test_gradcheck_of_the_reference():
     assert torch.autograd.gradcheck(fn, inputs, eps=1e-6, atol=1e-6)
 
 
-@pytest.mark.parametrize("seed, channels", [(0, 3), (5, 1)])
+@pytest.mark.parametrize("seed, channels", [(0, 3), (5, 1), (7, 2)])
 def test_cpu_gradients_match_reference_autograd(seed, channels):
     params, bg = scene(300, channels, seed)
     cam = camera(48, 36, f=50.0, seed=seed)
