@@ -9,29 +9,61 @@ C1 = 0.01 ** 2
 C2 = 0.03 ** 2
 
 
-def _window(size: int, sigma: float, channels: int, dtype, device) -> torch.Tensor:
+def _gaussian_1d(size: int, sigma: float, dtype, device) -> torch.Tensor:
+    """The normalised 1-D Gaussian [size] whose outer product with itself is the SSIM window."""
     x = torch.arange(size, dtype=dtype, device=device) - (size - 1) / 2
     g = torch.exp(-x * x / (2 * sigma * sigma))
-    g = g / g.sum()
+    return g / g.sum()
+
+
+def _window(size: int, sigma: float, channels: int, dtype, device) -> torch.Tensor:
+    g = _gaussian_1d(size, sigma, dtype, device)
     return (g[:, None] @ g[None, :]).expand(channels, 1, size, size).contiguous()
 
 
-def ssim(img: torch.Tensor, ref: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
-    """Mean SSIM of images [H, W, C] (zero-padded borders, like the 3DGS training loss)."""
+def _ssim_map(mu_x, mu_y, exx, eyy, exy) -> torch.Tensor:
+    """Per-pixel SSIM from the windowed means of x, y, x^2, y^2 and xy."""
+    sxx = exx - mu_x ** 2
+    syy = eyy - mu_y ** 2
+    sxy = exy - mu_x * mu_y
+    return ((2 * mu_x * mu_y + C1) * (2 * sxy + C2)) / ((mu_x ** 2 + mu_y ** 2 + C1) * (sxx + syy + C2))
+
+
+def _check(img: torch.Tensor, ref: torch.Tensor) -> None:
     if img.shape != ref.shape:
         raise ValueError(f"ssim: shapes differ: {tuple(img.shape)} vs {tuple(ref.shape)}")
+
+
+def ssim_ref(img: torch.Tensor, ref: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    """Reference: mean SSIM of images [H, W, C] with the 2-D window, five depthwise convolutions
+    (zero-padded borders, like the 3DGS training loss)."""
+    _check(img, ref)
     x = img.permute(2, 0, 1)[None]
     y = ref.permute(2, 0, 1)[None]
     C = x.shape[1]
     w = _window(window, sigma, C, x.dtype, x.device)
     pad = window // 2
-    mu_x = F.conv2d(x, w, padding=pad, groups=C)
-    mu_y = F.conv2d(y, w, padding=pad, groups=C)
-    sxx = F.conv2d(x * x, w, padding=pad, groups=C) - mu_x ** 2
-    syy = F.conv2d(y * y, w, padding=pad, groups=C) - mu_y ** 2
-    sxy = F.conv2d(x * y, w, padding=pad, groups=C) - mu_x * mu_y
-    s = ((2 * mu_x * mu_y + C1) * (2 * sxy + C2)) / ((mu_x ** 2 + mu_y ** 2 + C1) * (sxx + syy + C2))
-    return s.mean()
+    means = [F.conv2d(m, w, padding=pad, groups=C) for m in (x, y, x * x, y * y, x * y)]
+    return _ssim_map(*means).mean()
+
+
+def ssim(img: torch.Tensor, ref: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    """Mean SSIM of images [H, W, C]: `ssim_ref` computed fast. The window is separable, so the five
+    maps go through one depthwise convolution along the rows and one along the columns (2 x 11 taps
+    per pixel instead of 121; zero padding in each pass is the 2-D zero padding). On one core at
+    346 x 260 forward + backward is ~2x faster for three channels and ~15x for one (torch's 2-D
+    single-channel path is slow); docs/training_speed.md."""
+    _check(img, ref)
+    x = img.permute(2, 0, 1)[None]
+    y = ref.permute(2, 0, 1)[None]
+    C = x.shape[1]
+    k = 5 * C
+    g = _gaussian_1d(window, sigma, x.dtype, x.device)
+    pad = window // 2
+    maps = torch.cat([x, y, x * x, y * y, x * y], 1)                                      # [1, 5C, H, W]
+    maps = F.conv2d(maps, g.view(1, 1, 1, window).expand(k, 1, 1, window), padding=(0, pad), groups=k)
+    maps = F.conv2d(maps, g.view(1, 1, window, 1).expand(k, 1, window, 1), padding=(pad, 0), groups=k)
+    return _ssim_map(*maps.split(C, 1)).mean()
 
 
 def l1(img: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
