@@ -223,6 +223,13 @@ def worker_specs(precisions: list[str] | None, fields: list[str], coarse: list[i
     return specs
 
 
+def revision_factors(coarse: list[int]) -> list[int]:
+    """Render factors of the --against revision's workers: full size, then each coarse factor, so
+    that they pair one to one, in order, with this tree's workers when no precision or field is
+    asked for (`worker_specs(None, [], coarse)`)."""
+    return [1, *coarse]
+
+
 class Tree:
     def __init__(self, label: str, root: Path, threads: int, overrides: dict | None = None, factor: int = 1):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
@@ -297,8 +304,10 @@ def main(argv=None) -> int:
 
         trees = [Tree(label, REPO, args.threads, overrides, factor)
                  for label, overrides, factor in worker_specs(args.precisions, args.fields, args.coarse)]
-        if args.against:
-            trees.append(Tree(args.against, stack.enter_context(checkout(args.against)), args.threads))
+        if args.against:   # the revision at full size and at each coarse factor asked for
+            old_root = stack.enter_context(checkout(args.against))
+            trees += [Tree(args.against + (f", 1/{f} resolution" if f > 1 else ""), old_root, args.threads,
+                           None, f) for f in revision_factors(args.coarse)]
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
               f"deformation on, median of {args.iters} (ms; it/s); CPU: {cpu_summary()}")
         print("| method | model | tree | Gaussians | ms/it | it/s | raster fwd | raster bwd | MLP fwd | MLP bwd | rest |")
@@ -326,9 +335,12 @@ def main(argv=None) -> int:
                     base = args.precisions[0]
                     ratios_p.append((method, phase, ", ".join(f"{base} / {p} {meds[base] / meds[p]:.2f}"
                                                                 for p in args.precisions[1:])))
-                if args.against and len(trees) == 2:
-                    new, old = (statistics.median(x["total"] for x in r) for r in rows)
-                    ratios.append((method, phase, old / new))
+                if args.against and not args.precisions and not args.fields:
+                    med = [statistics.median(x["total"] for x in r) for r in rows]
+                    half = len(trees) // 2      # this tree's workers, then the revision's, factor by factor
+                    for i in range(half):
+                        where = f" 1/{trees[i].factor}" if trees[i].factor > 1 else ""
+                        ratios.append((method, phase + where, med[half + i] / med[i]))
         for t in trees:
             t.close()
     for method, phase, ratio in ratios:

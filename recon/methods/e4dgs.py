@@ -63,6 +63,8 @@ class E4DGS(Method):
         super().__init__(dataset, cfg)
         e = cfg.events
         sources = [EventSource(dataset.event_file(k)) for k in range(dataset.n_cameras)]
+        for src in sources:      # windows are cut every step: from memory where the events fit
+            src.load()
         self.n_range = self.window_counts(dataset, e, [s.n for s in sources])
         n_fixed = int(round(sum(self.n_range) / 2))
         self.sampler = WindowSampler(sources, self.n_range if e.ess else None, n_fixed)

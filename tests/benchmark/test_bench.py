@@ -504,3 +504,6 @@ def test_bench_train_times_the_mlp_at_each_precision_and_the_trajectories_beside
         (None, "trajectory", 1), (None, "trajectory", 2), (None, "trajectory", 4)]
     assert len({label for label, _, _ in specs}) == len(specs)
     assert worker_specs(None, [], []) == [("this tree", {}, 1)]      # the configs' own field and precision
+    # --against pairs this tree's workers with the revision's factor by factor
+    from tools.bench_train import revision_factors
+    assert [f for _, _, f in worker_specs(None, [], [2, 4])] == revision_factors([2, 4]) == [1, 2, 4]

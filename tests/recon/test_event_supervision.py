@@ -123,15 +123,23 @@ def test_linlog_response_matches_the_simulator():
         ev.log_response_t(torch.zeros(1), "gamma")
 
 
-def test_windows_hold_the_drawn_count_and_match_the_file(motion_scene):
+@pytest.mark.parametrize("in_memory", [False, True])
+def test_windows_hold_the_drawn_count_and_match_the_file(motion_scene, in_memory):
     ds = SceneDataset(motion_scene)
     src = EventSource(ds.event_file(0))
+    # load keeps the columns only when they fit; 0 bytes never fit (the disk path, as a large file)
+    assert src.load(max_bytes=1 << 30 if in_memory else 0) is in_memory
     allev = read_events(ds.event_file(0)).events
     r = np.random.default_rng(3)
     for _ in range(20):
         n = int(r.integers(1, src.n // 3))
         i0 = int(r.integers(1, src.n - n + 1))
         w = src.window(0, i0, n)
+        x, y, p = src.rows(i0, i0 + n)
+        np.testing.assert_array_equal(x, allev["x"][i0:i0 + n])
+        np.testing.assert_array_equal(p, allev["p"][i0:i0 + n])
+        np.testing.assert_array_equal(src.times(i0, i0 + n), allev["t"][i0:i0 + n])
+        x[:] = 0                     # what a caller does to a window does not reach the file's columns
         inside = (allev["t"] > w.t_start_us) & (allev["t"] <= w.t_end_us)
         assert len(w) == inside.sum() and abs(len(w) - n) <= np.sum(allev["t"] == w.t_end_us) + \
             np.sum(allev["t"] == w.t_start_us)
