@@ -26,6 +26,8 @@ from simulator.h5io import EventFileError, read_slice, file_info, open_checked, 
 
 
 class EventFile:
+    BYTES_PER_EVENT = 13        # x, y uint16, t int64, p uint8
+
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
         self._f = open_checked(self.path, full_check=True)   # opened once, every event checked once
@@ -36,8 +38,6 @@ class EventFile:
         self._g = self._f["events"]
         self._sensor: SimulatorConfig | None = None
         self._cols: dict[str, np.ndarray] | None = None     # the columns, once `load` kept them
-
-    BYTES_PER_EVENT = 13        # x, y uint16, t int64, p uint8
 
     def load(self, max_bytes: int = 256 << 20) -> bool:
         """Keep the t, x, y, p columns in memory when they fit in max_bytes, so `times` and `rows`
