@@ -29,17 +29,17 @@ def _ssim_map(mu_x, mu_y, exx, eyy, exy) -> torch.Tensor:
     return ((2 * mu_x * mu_y + C1) * (2 * sxy + C2)) / ((mu_x ** 2 + mu_y ** 2 + C1) * (sxx + syy + C2))
 
 
-def _check(img: torch.Tensor, ref: torch.Tensor) -> None:
+def _as_nchw(img: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Both images [H, W, C] as [1, C, H, W] views, after checking that their shapes agree."""
     if img.shape != ref.shape:
         raise ValueError(f"ssim: shapes differ: {tuple(img.shape)} vs {tuple(ref.shape)}")
+    return img.permute(2, 0, 1)[None], ref.permute(2, 0, 1)[None]
 
 
 def ssim_ref(img: torch.Tensor, ref: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
     """Reference: mean SSIM of images [H, W, C] with the 2-D window, five depthwise convolutions
     (zero-padded borders, like the 3DGS training loss)."""
-    _check(img, ref)
-    x = img.permute(2, 0, 1)[None]
-    y = ref.permute(2, 0, 1)[None]
+    x, y = _as_nchw(img, ref)
     C = x.shape[1]
     w = _window(window, sigma, C, x.dtype, x.device)
     pad = window // 2
@@ -53,9 +53,7 @@ def ssim(img: torch.Tensor, ref: torch.Tensor, window: int = 11, sigma: float = 
     per pixel instead of 121; zero padding in each pass is the 2-D zero padding). On one core at
     346 x 260 forward + backward is 1.8x faster for three channels and 13x for one (torch's 2-D
     single-channel path is slow); docs/training_speed.md."""
-    _check(img, ref)
-    x = img.permute(2, 0, 1)[None]
-    y = ref.permute(2, 0, 1)[None]
+    x, y = _as_nchw(img, ref)
     C = x.shape[1]
     k = 5 * C
     g = _gaussian_1d(window, sigma, x.dtype, x.device)

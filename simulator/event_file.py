@@ -64,15 +64,20 @@ class EventFile:
                 raise EventFileError(f"{self.path}: the stored simulator config is not valid ({exc})") from None
         return self._sensor
 
-    def _column(self, name: str, i0: int, i1: int) -> np.ndarray:
-        return self._cols[name][i0:i1].copy() if self._cols is not None else self._g[name][i0:i1]
+    def _column(self, name: str, i0: int, i1: int, own: bool = False) -> np.ndarray:
+        """Rows i0:i1 of a column: read from the file (a new array), or a view of the kept column,
+        copied when `own` (the caller returns it as it is, so it must not alias the column)."""
+        if self._cols is None:
+            return self._g[name][i0:i1]
+        view = self._cols[name][i0:i1]
+        return view.copy() if own else view
 
     def times(self, i0: int, i1: int) -> np.ndarray:
-        return self._column("t", i0, i1).astype(np.int64) + self.t_offset_us
+        return self._column("t", i0, i1).astype(np.int64, copy=False) + self.t_offset_us
 
     def rows(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         p = self._column("p", i0, i1).astype(np.int8) * 2 - 1
-        return self._column("x", i0, i1), self._column("y", i0, i1), p
+        return self._column("x", i0, i1, own=True), self._column("y", i0, i1, own=True), p
 
     def indices(self, t0_us: int, t1_us: int) -> tuple[int, int]:
         return window_indices(self._f, int(t0_us), int(t1_us))

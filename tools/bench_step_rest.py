@@ -72,7 +72,10 @@ def rows(args) -> list[tuple[str, str, float, float]]:
         adam.append(timed(opt.step, args.reps))
     out.append(("Adam step", f"{sum(np.prod(s) for s in shapes) * args.gaussians:,} values", *adam))
     scene = Path(args.scene)
-    if (scene / "manifest.json").exists():
+    if not (scene / "manifest.json").exists():
+        print(f"bench_step_rest: {scene}: no dataset here, the event-window row is left out "
+              f"(make dataset SCENES={scene.name.split('_x')[0]})", file=sys.stderr)
+    else:
         from recon.event_windows import EventSource
         from scene_format.reader import SceneDataset
 
