@@ -160,3 +160,54 @@ def output_inside_input(output: str | os.PathLike, inputs: dict[str, str | os.Pa
         if out == src or src in out.parents:
             return f"{output}: inside {what} {path}; an output must not be written into its input, choose another folder"
     return None
+
+
+def _same_or_inside(a: Path, b: Path) -> tuple[bool, bool]:
+    """(a is b, a lies inside folder b), comparing resolved paths (links and '..' followed)."""
+    ra, rb = a.resolve(), b.resolve()
+    same = ra == rb or (a.exists() and b.exists() and os.path.samefile(a, b))
+    return same, rb in ra.parents
+
+
+def output_overlap(outputs: list[tuple[str, Path]], inputs: list[tuple[str, Path]],
+                   protected: frozenset[str] = frozenset()) -> str | None:
+    """Why an output would land on an input, or None: an output that is an input (a file, or the folder
+    an input lies in when the output is a folder), or one inside an input folder named in `protected`
+    (datasets and frame folders a command must leave as they are). Names are the command's options."""
+    for oname, out in outputs:
+        for iname, inp in inputs:
+            same, inside = _same_or_inside(out, inp)
+            if same:
+                return f"{oname} {out}: is also {iname} {inp}, an input; choose another output name"
+            if inside and inp.is_dir() and iname in protected:
+                return f"{oname} {out}: lies inside {iname} {inp}, an input folder this command only reads; write elsewhere"
+            if _same_or_inside(inp, out)[1] and out.exists() and out.is_file():
+                return f"{oname} {out}: is a file, and {iname} {inp} would be inside it"
+    return None
+
+
+FREE_SPACE_MARGIN = 1 << 20     # bytes kept free beyond a native writer's estimate (its own metadata)
+
+
+def require_free_space(path: str | os.PathLike, n_bytes: int) -> None:
+    """OSError ENOSPC naming `path` when its file system has less than `n_bytes` (+ a margin) free:
+    asked before writers that cannot fail cleanly on a full disk (HDF5 can crash the process,
+    dv-processing aborts it), with an upper bound of what they will write."""
+    path = Path(path)
+    folder = next((d for d in [path.parent, *path.parent.parents] if d.exists()), Path("/"))
+    st = os.statvfs(folder)
+    free = st.f_bavail * st.f_frsize
+    if free < n_bytes + FREE_SPACE_MARGIN:
+        raise OSError(errno.ENOSPC, f"No space left on device (needs up to {(n_bytes + FREE_SPACE_MARGIN) / 1e6:.1f} MB, "
+                                    f"{free / 1e6:.1f} MB free)", str(path))
+
+
+def as_disk_error(exc: BaseException, path: str | os.PathLike) -> OSError | None:
+    """A library's error that is a full disk or a write failure in disguise (h5py's 'Driver write
+    request failed ... errno = 28', sqlite's 'database or disk is full'), as an OSError naming `path`;
+    None for anything else."""
+    text = str(exc)
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC or "errno = 28" in text or "disk is full" in text \
+            or "No space left" in text:
+        return OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    return None

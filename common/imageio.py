@@ -1,7 +1,8 @@
 """Image files: linear OpenEXR (read/write) and 8/16-bit PNG (sRGB, linearised on read).
 
 Single-channel EXRs are written as channel `V` (as Blender writes them); RGB as `R`, `G`, `B`.
-Readers return float32 arrays: [H, W] for one channel, [H, W, 3] for RGB (alpha dropped).
+Readers return float32 arrays: [H, W] for one channel, [H, W, 3] for RGB (an opaque alpha dropped,
+a transparent one refused).
 """
 from __future__ import annotations
 
@@ -30,13 +31,22 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     except Exception as exc:  # OpenEXR raises plain RuntimeError/Exception types
         raise ImageReadError(f"{path}: cannot read OpenEXR file ({exc})") from None
     upper = {name.split(".")[-1].upper(): arr for name, arr in channels.items()}
+    image = None
     if all(c in upper for c in "RGB"):
-        return np.stack([upper[c] for c in "RGB"], axis=-1).astype(np.float32)
-    for name in _SINGLE_CHANNEL_NAMES:
-        if name in upper:
-            return upper[name].astype(np.float32)
-    if len(channels) == 1 and next(iter(upper)) not in _NOT_INTENSITY:
-        return next(iter(channels.values())).astype(np.float32)
+        image = np.stack([upper[c] for c in "RGB"], axis=-1).astype(np.float32)
+    else:
+        name = next((n for n in _SINGLE_CHANNEL_NAMES if n in upper), None)
+        if name is not None:
+            image = upper[name].astype(np.float32)
+        elif len(channels) == 1 and next(iter(upper)) not in _NOT_INTENSITY:
+            image = next(iter(channels.values())).astype(np.float32)
+    alpha = upper.get("A")
+    if image is not None and alpha is not None and not np.all(alpha >= 1.0):     # NaN alpha is refused too
+        raise ImageReadError(f"{path}: has transparent pixels (alpha down to {float(np.nanmin(alpha)):.3g}); expected "
+                             "opaque frames (an RGBA render, premultiplied or not, is not the frame a camera saw: "
+                             "composite it over its background first)")
+    if image is not None:
+        return image
     raise ImageReadError(f"{path}: expected intensity: channels R,G,B or one luminance channel (V, Y or L), found "
                          f"{', '.join(sorted(channels))}" + (" (alpha and depth are not intensity)"
                                                             if set(upper) & set(_NOT_INTENSITY) else ""))

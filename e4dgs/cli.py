@@ -77,11 +77,47 @@ def join_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+OUTPUT_OPTIONS = ("out", "export")             # every other path an option names is an input
+PROTECTED_INPUTS = frozenset({"--frames", "--scene", "--data", "--renders", "recording", "source", "--events",
+                              "--timestamps", "--config", "--weights", "events", "data"})
+
+
+def _option_name(dest: str, parser_actions) -> str:
+    for a in parser_actions:
+        if a.dest == dest:
+            return a.option_strings[-1] if a.option_strings else dest
+    return dest
+
+
+def check_outputs_apart(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """Before any work: no output a command writes (siblings included, from the command's
+    `sibling_outputs`) is one of its inputs or lies inside an input folder it only reads."""
+    from pathlib import Path
+
+    from common.fileio import output_overlap
+
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[args.command]
+    outputs, inputs = [], []
+    for dest, value in vars(args).items():
+        values = value if isinstance(value, list) else [value]
+        for v in values:
+            if isinstance(v, Path):
+                (outputs if dest in OUTPUT_OPTIONS else inputs).append((_option_name(dest, sub._actions), v))
+    siblings = getattr(args, "sibling_outputs", None)
+    if siblings is not None:
+        outputs += [(f"{name} (written beside --out)", p) for name, p in siblings(args)]
+    why = output_overlap(outputs, inputs, PROTECTED_INPUTS)
+    if why:
+        raise SystemExit(f"error: {why}")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("E4DGS_DEBUG") == "1"
     argv = join_negative_values([a for a in argv if a != "--debug"])
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    check_outputs_apart(args, parser)
     try:
         with warnings.catch_warnings():   # warnings as one line each; the toolkit's own every time
             warnings.filterwarnings("always", category=ConfigWarning)

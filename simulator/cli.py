@@ -87,7 +87,8 @@ def add_simulate_parser(sub) -> None:
     p.add_argument("--format", action="append", default=[], metavar="FORMAT", choices=EXTRA_FORMATS,
                    help="also write the events in this format beside the .h5 (repeatable): "
                         + ", ".join(EXTRA_FORMATS) + " (docs/formats.md)")
-    p.set_defaults(func=run_simulate)
+    p.set_defaults(func=run_simulate, sibling_outputs=lambda a: [(f"--format {f}", extra_output(a.out, f))
+                                                                 for f in dict.fromkeys(a.format)])
 
 
 EXTRA_FORMATS = ("aedat4", "evt3", "evt2", "rosbag", "rosbag2", "npz", "txt")
@@ -126,6 +127,10 @@ def run_simulate(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         raise SystemExit(f"error: {exc}") from None
     check_output(args.out, args.frames)
+    for fmt in dict.fromkeys(args.format):      # before any work: a ROS2 bag is a folder, never overwritten
+        if fmt == "rosbag2" and extra_output(args.out, fmt).exists():
+            raise SystemExit(f"error: --format rosbag2: {extra_output(args.out, fmt)} exists (a ROS2 bag is a folder, "
+                             "never overwritten); remove it or choose another --out")
     files = list_frames(args.frames)
     if args.timestamps:
         t_us = read_timestamps(args.timestamps, len(files))
@@ -164,6 +169,10 @@ def run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+MAX_VIEW_SIDE = 8192          # pixels a side of a drawn event picture
+MAX_VIEW_FRAMES = 100_000     # frames of one video (~25 min of drawing at ~70 frames/s)
+
+
 def add_view_parser(sub) -> None:
     p = sub.add_parser("view", help="draw events of a time window as a PNG, or a sliding window as MP4")
     p.add_argument("events", type=Path, help="event file (.h5)")
@@ -187,10 +196,15 @@ def run_view(args: argparse.Namespace) -> int:
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)
-        # the stream's own end, also when the file records none (its attribute would fall back to the start)
+        # the stream's own span (a recording may start anywhere, e.g. at Unix-epoch microseconds), also
+        # when the file records no end (its attribute would fall back to the offset)
+        first = int(ev.times(0, 1)[0]) if ev.n else ev.t_offset_us
         last = int(ev.times(ev.n - 1, ev.n)[0]) if ev.n else ev.t_offset_us
-        start, end = ev.t_offset_us, max(ev.t_end_us, last) + 1
+        start, end = first, max(ev.t_end_us, last) + 1
         scale = args.scale or max(1, 640 // ev.width)
+        if max(ev.width, ev.height) * scale > MAX_VIEW_SIDE:
+            raise SystemExit(f"error: --scale {scale}: the picture would be {ev.width * scale}x{ev.height * scale} "
+                             f"pixels; at most {MAX_VIEW_SIDE} a side (--scale <= {max(1, MAX_VIEW_SIDE // max(ev.width, ev.height))})")
 
         def draw(stream, a: int, b: int):
             frame = event_frame(stream)
@@ -209,13 +223,18 @@ def run_view(args: argparse.Namespace) -> int:
             step = parse_time_us(args.step) if args.step else window
             if window <= 0 or step <= 0:
                 raise SystemExit("error: --window and --step must be positive")
+            n_frames = (max(t1 - t0 - window, 0) + step - 1) // step + 1
+            if n_frames > MAX_VIEW_FRAMES:
+                raise SystemExit(f"error: --window {args.window} / --step {args.step or args.window} over [{t0}, {t1}) us "
+                                 f"makes {n_frames} frames; at most {MAX_VIEW_FRAMES} (a longer --step or a shorter "
+                                 "--t0 .. --t1)")
             starts = window_starts(t0, t1, window, step)
             from tqdm import tqdm
 
-            frames = [draw(ev.window(s, s + window), s, s + window)
-                      for s in tqdm(starts, desc="view", unit="frame")]
+            frames = (draw(ev.window(s, s + window), s, s + window)
+                      for s in tqdm(starts, desc="view", unit="frame"))
             save_video(args.out, frames, fps=args.fps)
-            print(f"{args.out}: {len(frames)} frames of {window} us every {step} us ({save_video.codec})")
+            print(f"{args.out}: {len(starts)} frames of {window} us every {step} us ({save_video.codec})")
         else:
             raise SystemExit(f"error: --out {args.out}: expected a .png or .mp4 file name")
     except (EventFileError, ValueError) as exc:

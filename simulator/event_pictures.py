@@ -1,9 +1,12 @@
 """Pictures of events: an event frame (ON and OFF in two colours) and a sliding-window video."""
 from __future__ import annotations
 
+import errno
+import itertools
 import os
 import re
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
@@ -76,44 +79,62 @@ def annotate(frame: np.ndarray, t0_us: int, t1_us: int, scale: int = 1) -> np.nd
     return np.concatenate([img, strip], 0)
 
 
-def save_video(path: str | os.PathLike, frames: list[np.ndarray] | np.ndarray, fps: float = 30.0) -> Path:
-    """Write RGB uint8 frames to an MP4 file atomically: H.264 (yuv420p, which browsers play) through the
-    ffmpeg of imageio-ffmpeg, or MPEG-4 Part 2 (mp4v) through OpenCV when that ffmpeg is missing.
-    `save_video.codec` says which."""
+def _encode(out: Path, frames: Iterable[np.ndarray], h: int, w: int, fps: float) -> None:
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        imageio_ffmpeg = None
+    if imageio_ffmpeg is not None:
+        ph, pw = h + h % 2, w + w % 2                 # yuv420p needs even sides: pad with white
+        writer = imageio_ffmpeg.write_frames(str(out), (pw, ph), fps=fps, codec="libx264",
+                                             pix_fmt_out="yuv420p", macro_block_size=1, quality=8,
+                                             ffmpeg_log_level="fatal")
+        writer.send(None)
+        try:
+            for f in frames:
+                pad = np.full((ph, pw, 3), 255, np.uint8)
+                pad[:h, :w] = f
+                writer.send(np.ascontiguousarray(pad))
+        finally:
+            writer.close()
+        save_video.codec = "h264"
+        return
+    import cv2
+
+    writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+    if not writer.isOpened():
+        raise RuntimeError(f"{out}: OpenCV cannot open an MP4 writer")
+    try:
+        for f in frames:
+            writer.write(np.ascontiguousarray(f[..., ::-1]))
+    finally:
+        writer.release()
+    save_video.codec = "mp4v"
+
+
+def save_video(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float = 30.0) -> Path:
+    """Write RGB uint8 frames (any iterable: a generator keeps one frame in memory) to an MP4 file
+    atomically: H.264 (yuv420p, which browsers play) through the ffmpeg of imageio-ffmpeg, or MPEG-4
+    Part 2 (mp4v) through OpenCV when that ffmpeg is missing. `save_video.codec` says which."""
     path = Path(path)
-    if len(frames) == 0:
+    it = iter(frames)
+    first = next(it, None)
+    if first is None:
         raise ValueError(f"{path}: no frames to write")
-    h, w = frames[0].shape[:2]
+    frames = itertools.chain([first], it)
+    h, w = first.shape[:2]
     with atomic_output(path) as tmp:
         # the writers pick the container from the extension, so the temporary name keeps it
         tmp_mp4 = tmp.with_name(tmp.name + path.suffix)
         try:
-            import imageio_ffmpeg
-        except ImportError:
-            imageio_ffmpeg = None
-        if imageio_ffmpeg is not None:
-            ph, pw = h + h % 2, w + w % 2                 # yuv420p needs even sides: pad with white
-            writer = imageio_ffmpeg.write_frames(str(tmp_mp4), (pw, ph), fps=fps, codec="libx264",
-                                                 pix_fmt_out="yuv420p", macro_block_size=1, quality=8,
-                                                 ffmpeg_log_level="error")
-            writer.send(None)
-            for f in frames:
-                out = np.full((ph, pw, 3), 255, np.uint8)
-                out[:h, :w] = f
-                writer.send(np.ascontiguousarray(out))
-            writer.close()
-            save_video.codec = "h264"
-        else:
-            import cv2
-
-            writer = cv2.VideoWriter(str(tmp_mp4), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-            if not writer.isOpened():
-                raise RuntimeError(f"{path}: OpenCV cannot open an MP4 writer")
-            try:
-                for f in frames:
-                    writer.write(np.ascontiguousarray(f[..., ::-1]))
-            finally:
-                writer.release()
-            save_video.codec = "mp4v"
-        os.replace(tmp_mp4, tmp)
+            _encode(tmp_mp4, frames, h, w, fps)
+            os.replace(tmp_mp4, tmp)
+        except OSError as exc:       # ffmpeg dies on a full disk and the pipe breaks: say why, naming the file
+            st = os.statvfs(tmp.parent)
+            if st.f_bavail * st.f_frsize < (1 << 20) or exc.errno == errno.ENOSPC:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path)) from None
+            raise OSError(exc.errno or errno.EIO, f"the video encoder stopped ({' '.join(str(exc).split())[:200]})",
+                          str(path)) from None
+        finally:
+            tmp_mp4.unlink(missing_ok=True)
     return path

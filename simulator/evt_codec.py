@@ -29,6 +29,8 @@ Each encoder comes as a readable reference (`*_ref`) and a fast one with the sam
 from __future__ import annotations
 
 import datetime
+import re
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -49,27 +51,48 @@ class EvtFormatError(ValueError):
 
 
 # -- header ------------------------------------------------------------------------------------------
-def raw_header(fmt: str, width: int, height: int, date: datetime.datetime | None = None) -> bytes:
-    """The ASCII header Metavision / OpenEB write before the words of a `.raw` file."""
+def raw_header(fmt: str, width: int, height: int, date: datetime.datetime | None = None, t0_us: int = 0) -> bytes:
+    """The ASCII header Metavision / OpenEB write before the words of a `.raw` file; `t0_us` > 0 adds
+    faery's `% t0 <us>` line (the words hold times relative to it)."""
     version, name = FORMATS[fmt]
     date = date or datetime.datetime.now(datetime.timezone.utc)
     lines = [f"date {date:%Y-%m-%d %H:%M:%S}", f"evt {version}", f"format {name};height={height};width={width}",
-             f"geometry {width}x{height}", "integrator_name e4dgs-toolkit", "plugin_name e4dgs_simulator",
-             "end"]
+             f"geometry {width}x{height}", "integrator_name e4dgs-toolkit", "plugin_name e4dgs_simulator"]
+    if t0_us:
+        lines.append(f"t0 {int(t0_us)}")
+    lines.append("end")
     return "".join(f"% {line}\n" for line in lines).encode("ascii")
 
 
-def parse_raw_header(data: bytes, source: str = "file") -> tuple[str, int, int, int]:
-    """(fmt 'evt2' | 'evt3', width, height, offset of the first word) of a `.raw` file's bytes."""
+class RawHeader(NamedTuple):
+    fmt: str            # 'evt2' | 'evt3'
+    width: int
+    height: int
+    offset: int         # bytes before the first word
+    t0_us: int          # absolute time of word time 0 (faery's `% t0` line; 0 without one)
+    has_end: bool       # the header closes with `% end` (else its end is where lines stop)
+
+
+_HEADER_LINE = re.compile(rb"%[ -~]{0,1023}\r?\n")   # '%', printable ASCII, a line end
+
+
+def parse_raw_header(data: bytes, source: str = "file") -> RawHeader:
+    """The header of a `.raw` file's bytes. Without a `% end` line (faery writes none) the header is
+    the run of lines of '%' and printable ASCII; a first word whose first byte is '%' stays data."""
     fields: dict[str, str] = {}
     pos = 0
+    has_end = False
     while pos < len(data) and data[pos:pos + 1] == b"%":
-        end = data.find(b"\n", pos)
-        if end < 0:
-            raise EvtFormatError(f"{source}: the header's last line has no end (a truncated file?)")
-        line = data[pos + 1:end].decode("ascii", errors="replace").strip()
-        pos = end + 1
+        m = _HEADER_LINE.match(data, pos)
+        if m is None:
+            if not fields:
+                raise EvtFormatError(f"{source}: the header's first line is not a text line ending in a line "
+                                     "break (a truncated file, or not a .raw file)")
+            break                       # not a text line: the words begin here
+        line = m.group()[1:].decode("ascii").strip()
+        pos = m.end()
         if line == "end":
+            has_end = True
             break
         key, _, value = line.partition(" ")
         fields[key] = value.strip()
@@ -78,7 +101,7 @@ def parse_raw_header(data: bytes, source: str = "file") -> tuple[str, int, int, 
     fmt = width = height = None
     if "format" in fields:
         parts = fields["format"].split(";")
-        fmt = {"EVT2": "evt2", "EVT3": "evt3"}.get(parts[0].strip().upper())
+        fmt = {"EVT2": "evt2", "EVT3": "evt3", "2.0": "evt2", "3.0": "evt3"}.get(parts[0].strip().upper())
         opts = dict(p.split("=", 1) for p in parts[1:] if "=" in p)
         width, height = opts.get("width"), opts.get("height")
     if fmt is None and "evt" in fields:
@@ -94,7 +117,31 @@ def parse_raw_header(data: bytes, source: str = "file") -> tuple[str, int, int, 
         raise EvtFormatError(f"{source}: the header gives no sensor size (format / geometry)") from None
     if not (0 < w <= MAX_SENSOR and 0 < h <= MAX_SENSOR):
         raise EvtFormatError(f"{source}: sensor {w}x{h} outside 1..{MAX_SENSOR} per side")
-    return fmt, w, h, pos
+    t0 = fields.get("t0", "0")
+    if not t0.isdigit():
+        raise EvtFormatError(f"{source}: header line '% t0 {t0}': expected the start time in whole microseconds")
+    return RawHeader(fmt, w, h, pos, int(t0), has_end)
+
+
+def neutral_lead(fmt: str, body: bytes) -> bytes:
+    """A TIME_HIGH 0 word to put before `body` when its first byte is '%' (0x25): a reader that takes
+    every line starting with '%' as header (expelliarmus does, even after `% end`) would swallow the
+    first words. At the start of a stream the word changes no decoded time (the time high starts at
+    0 and only rises to the first word's)."""
+    if body[:1] != b"%":
+        return b""
+    return np.array([EVT2_TIME_HIGH << 28], "<u4").tobytes() if fmt == "evt2" else \
+        np.array([EVT3_TIME_HIGH << 12], "<u2").tobytes()
+
+
+def time_origin_us(t: np.ndarray, fmt: str) -> int:
+    """The `% t0` a stream needs in format `fmt`: 0 when its absolute times fit the words (EVT 2.0: up
+    to 2^34 us; EVT 3.0: a first time before the first 24-bit wrap, 16.78 s, which a decoder starting
+    from 0 reads exactly), else the first event's time (a recording stamped in epoch time)."""
+    if len(t) == 0 or int(t[0]) < 0:
+        return 0
+    fits = int(t[-1]) <= EVT2_MAX_TIME_US if fmt == "evt2" else int(t[0]) < (1 << 24)
+    return 0 if fits else int(t[0])
 
 
 def check_encodable(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int,

@@ -10,6 +10,7 @@ All file writers write to a temporary name and rename when complete.
 """
 from __future__ import annotations
 
+import io
 import os
 from pathlib import Path
 
@@ -56,12 +57,16 @@ def seconds_text(t_us: int) -> str:
 
 
 def parse_seconds(text: str) -> int:
-    """Exact inverse of seconds_text for any decimal seconds text ('-0.001939', '2', '1.5')."""
+    """Decimal seconds text -> integer microseconds, rounded to the nearest (half away from zero):
+    the exact inverse of seconds_text, and rpg_e2vid's extractor's 12 decimals ('{:.12f}', float noise
+    such as '17179.869182999999') land on the microsecond they stand for."""
     neg = text.startswith("-")
     whole, _, frac = text.lstrip("+-").partition(".")
-    if not (whole or frac) or not (whole or "0").isdigit() or (frac and not frac.isdigit()) or len(frac) > 6:
-        raise ValueError(f"{text!r} is not a time in seconds with at most microsecond digits")
-    us = int(whole or "0") * 1_000_000 + int(frac.ljust(6, "0") or "0")
+    if not (whole or frac) or not (whole or "0").isdigit() or (frac and not frac.isdigit()):
+        raise ValueError(f"{text!r} is not a time in decimal seconds")
+    us = int(whole or "0") * 1_000_000 + int(frac[:6].ljust(6, "0") or "0")
+    if len(frac) > 6 and int(frac[6]) >= 5:
+        us += 1
     return -us if neg else us
 
 
@@ -93,6 +98,9 @@ def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
             raise ValueError(f"{path}: line {bad[0] + 2}: {name} = {data[bad[0], k][:20]!r} is not a non-negative integer")
         cols.append(data[:, k].astype(np.int64))
     x, y, p = cols
+    if (p > 1).any():
+        i = int(np.flatnonzero(p > 1)[0])
+        raise ValueError(f"{path}: line {i + 2}: p = {int(p[i])}; expected 0 (OFF) or 1 (ON)")
     for name, v, limit in (("x", x, width), ("y", y, height)):
         if (v >= limit).any():
             i = int(np.flatnonzero(v >= limit)[0])
@@ -108,12 +116,45 @@ def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
 def write_npz(path: str | os.PathLike, stream: EventStream) -> Path:
     path = Path(path)
     ev = stream.events
-    with atomic_output(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, t=ev["t"], x=ev["x"], y=ev["y"], p=ev["p"], width=stream.width, height=stream.height)
+    buf = io.BytesIO()      # zipped in memory: a full disk then fails one plain write, not zipfile's finaliser
+    np.savez(buf, t=ev["t"], x=ev["x"], y=ev["y"], p=ev["p"], width=stream.width, height=stream.height)
+    with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(buf.getbuffer())
     return path
 
 
 def read_npz(path: str | os.PathLike) -> EventStream:
+    """An .npz of arrays t (integer microseconds), x, y, p (+1 / -1, or 1 / 0), width, height; a
+    column of another kind (float seconds, negative pixels, other polarities) is refused by name."""
+    path = Path(path)
     with np.load(path) as z:
-        return EventStream(make_events(z["t"], z["x"], z["y"], z["p"]), int(z["width"]), int(z["height"]))
+        cols = {k: np.asarray(z[k]) for k in ("t", "x", "y", "p")}
+        width, height = (np.asarray(z[k]) for k in ("width", "height"))
+    for name in ("width", "height"):
+        v = {"width": width, "height": height}[name]
+        if v.shape != () or v.dtype.kind not in "iu" or int(v) <= 0:
+            raise ValueError(f"{path}: {name}: expected a positive integer scalar, found {v.dtype.name} "
+                             f"of shape {v.shape}")
+    n = len(cols["t"])
+    for name, col in cols.items():
+        if col.ndim != 1 or len(col) != n:
+            raise ValueError(f"{path}: {name}: expected a 1-D array of {n} values like t, found shape {col.shape}")
+        if col.dtype.kind not in "iu" and not (name == "p" and col.dtype.kind == "b"):
+            hint = " (seconds? multiply by 1e6 and round to integer microseconds)" if name == "t" and col.dtype.kind == "f" else ""
+            raise ValueError(f"{path}: {name}: expected integers, found {col.dtype.name}{hint}")
+    p = cols["p"].astype(np.int64)
+    if n and not (np.isin(p, (-1, 1)).all() or np.isin(p, (0, 1)).all()):
+        bad = int(p[~np.isin(p, (-1, 0, 1))][0]) if (~np.isin(p, (-1, 0, 1))).any() else 0
+        raise ValueError(f"{path}: p: expected +1 / -1 (or 1 / 0) for ON / OFF, found {bad}")
+    for name, limit in (("x", int(width)), ("y", int(height))):
+        col = cols[name]
+        bad = np.flatnonzero((col < 0) | (col >= limit))
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(f"{path}: {name}[{i}] = {int(col[i])} outside the sensor ({int(width)}x{int(height)})")
+    events = make_events(cols["t"], cols["x"], cols["y"], np.where(p > 0, 1, -1).astype(np.int8))
+    try:
+        validate_events(events, int(width), int(height))
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return EventStream(events, int(width), int(height))

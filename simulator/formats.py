@@ -65,7 +65,7 @@ def detect_format(path: str | os.PathLike) -> str:
     if head.startswith(b"PK"):
         return "npz"
     if head.startswith(b"%"):
-        return vendor_formats.raw_info(path)[0]
+        return vendor_formats.raw_info(path).fmt
     if path.suffix == ".txt":
         return "txt"
     raise FormatError(f"{path}: not a recognised event file (HDF5, AEDAT4, Prophesee .raw EVT 2.0 / 3.0, ROS bag, "

@@ -5,7 +5,9 @@
                             streams longer than 71 minutes fit)
     events/p  uint8  [N]    1 = ON, 0 = OFF (DSEC convention; in memory p is +1 / -1)
     ms_to_idx uint64 [M]    ms_to_idx[m] = first index with t >= m * 1000 (relative time)
-    t_offset  int64  scalar absolute time of relative t = 0, microseconds
+    t_offset  int64  scalar absolute time of relative t = 0, microseconds: absolute times are kept
+                            (t_offset + t); a recording stamped in Unix-epoch microseconds gets its
+                            first event's millisecond as t_offset, as DSEC does
     attrs: width, height, format_version, and every simulator parameter used (name = value), plus
            the resolved config as YAML text in `simulator_config`.
 
@@ -23,13 +25,14 @@ from typing import Any, Mapping
 import h5py
 import numpy as np
 
-from common.fileio import remove_stale_temps, temp_path_for
+from common.fileio import as_disk_error, remove_stale_temps, require_free_space, temp_path_for
 from common.config import dump_config, to_dict
 from simulator.event_check import EventContentError, check_chunk, check_event_datasets, check_structure
 from simulator.events import EVENT_DTYPE, EventStream, validate_events
 
 FORMAT_VERSION = 1
 _CHUNK = 1 << 16
+_CACHE_BYTES = 8 << 20     # what HDF5's chunk caches may still hold unwritten (5 datasets, 1 MiB each)
 
 
 class EventFileError(ValueError):
@@ -57,6 +60,7 @@ class EventFileWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_temps(self.path)
         self._tmp = temp_path_for(self.path)
+        require_free_space(self.path, 0)
         self._file = h5py.File(self._tmp, "w")
         g = self._file.create_group("events")
         # Deterministic bytes: the same events always give the same file (datasets are compared by SHA-256
@@ -91,6 +95,28 @@ class EventFileWriter:
         self._ms[start_ms:] = idx.astype(np.uint64)
 
     def append(self, events: np.ndarray) -> None:
+        """Add sorted events after those written (a full disk: the file is dropped, OSError names it)."""
+        self._guarded(self._append, events, len(events) * (13 + 8))
+
+    def _guarded(self, fn, arg, n_bytes: int):
+        """Run a write after checking the disk can take `n_bytes` (HDF5 may crash the process on a full
+        disk rather than fail); on a write error drop the unfinished file and name the output."""
+        if not self._closed:
+            try:
+                require_free_space(self.path, n_bytes + _CACHE_BYTES)
+            except OSError:
+                self.abort()
+                raise
+        try:
+            return fn(arg)
+        except Exception as exc:
+            disk = as_disk_error(exc, self.path)
+            if disk is None:
+                raise
+            self.abort()
+            raise disk from None
+
+    def _append(self, events: np.ndarray) -> None:
         if self._closed:
             raise EventFileError(f"{self.path}: writer is closed")
         if len(events) == 0:
@@ -120,6 +146,10 @@ class EventFileWriter:
         if self._closed:
             return self.path
         end_rel = max(self._last_t_rel, -1 if t_end_us is None else int(t_end_us) - self.t_offset_us)
+        return self._guarded(self._close, t_end_us, 8 * (max(end_rel, 0) // 1000 + 2 - self._ms.shape[0]))
+
+    def _close(self, t_end_us: int | None) -> Path:
+        end_rel = max(self._last_t_rel, -1 if t_end_us is None else int(t_end_us) - self.t_offset_us)
         # every millisecond after the last event maps to n_events; one entry past the end
         start_ms = self._ms.shape[0]
         stop_ms = max(end_rel, 0) // 1000 + 1
@@ -136,9 +166,12 @@ class EventFileWriter:
     def abort(self) -> None:
         """Drop the unfinished file (nothing appears at `path`)."""
         if not self._closed:
-            self._file.close()
-            self._tmp.unlink(missing_ok=True)
             self._closed = True
+            try:
+                self._file.close()
+            except Exception:       # noqa: BLE001 - a file that failed to write may fail to close: drop it anyway
+                pass
+            self._tmp.unlink(missing_ok=True)
 
     def __enter__(self) -> "EventFileWriter":
         return self
@@ -150,9 +183,18 @@ class EventFileWriter:
             self.abort()
 
 
-def write_events(path: str | os.PathLike, stream: EventStream, t_offset_us: int = 0,
+def default_offset_us(events: np.ndarray) -> int:
+    """t_offset for a stream: its first event's time, floored to a whole millisecond (so ms_to_idx's
+    milliseconds are absolute ones); 0 for an empty stream. A stream that starts within the first
+    millisecond (the simulator's) keeps t_offset 0, a recording stamped in epoch time gets its start."""
+    return int(events["t"][0]) // 1000 * 1000 if len(events) else 0
+
+
+def write_events(path: str | os.PathLike, stream: EventStream, t_offset_us: int | None = None,
                  attrs: Mapping[str, Any] | None = None, t_end_us: int | None = None) -> Path:
-    """Write a whole in-memory stream (in chunks) to `path`."""
+    """Write a whole in-memory stream (in chunks) to `path`; `t_offset_us` None: `default_offset_us`."""
+    if t_offset_us is None:
+        t_offset_us = default_offset_us(stream.events)
     with EventFileWriter(path, stream.width, stream.height, t_offset_us, attrs) as w:
         for i in range(0, len(stream), 1 << 20):
             w.append(stream.events[i:i + (1 << 20)])

@@ -67,14 +67,20 @@ class EventSpool:
         validate_events(events, self.width, self.height)
         if events["t"][0] < self._last_t:
             raise ValueError(f"{self.path}: events appended out of time order")
-        self._spool.write(np.ascontiguousarray(events).tobytes())
+        try:
+            self._spool.write(np.ascontiguousarray(events).tobytes())
+        except OSError as exc:          # a full disk: name the file (a write's error names none)
+            raise OSError(exc.errno, exc.strerror, str(self.spool_path)) from None
         self.n_events += len(events)
         self._last_t = int(events["t"][-1])
 
     def sync(self) -> int:
         """Flush to disk; returns the event count to pass as `resume_count` after a kill."""
-        self._spool.flush()
-        os.fsync(self._spool.fileno())
+        try:
+            self._spool.flush()
+            os.fsync(self._spool.fileno())
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, str(self.spool_path)) from None
         return self.n_events
 
     def finish(self, t_end_us: int | None = None) -> Path:

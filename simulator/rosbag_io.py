@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.fileio import atomic_output
+from common.fileio import as_disk_error, atomic_output, require_free_space
 from simulator import ros_messages
 from simulator.events import EventStream
 from simulator.vendor_formats import FormatError, checked_stream, vendor_module
@@ -52,9 +52,10 @@ def event_messages(stream: EventStream, frame_id: str, message_us: int, ros2: bo
     """(bag time ns, serialized EventArray) per `message_us` window of the stream (empty windows skipped;
     each stamped with its last event's time)."""
     ev = stream.events
-    if not len(ev):
-        return
     encode = ros_messages.event_array_cdr if ros2 else ros_messages.event_array_ros1
+    if not len(ev):          # one empty message, so that the bag still says the sensor size
+        yield 0, encode(0, frame_id, stream.width, stream.height, ev["t"], ev["x"], ev["y"], ev["p"])
+        return
     t = ev["t"]
     bins = (t - t[0]) // message_us
     cuts = np.flatnonzero(np.diff(bins)) + 1
@@ -76,10 +77,28 @@ def write_bag(path: str | os.PathLike, streams: dict[str, EventStream], ros2: bo
     if ros2 and path.exists():
         raise FormatError(f"{path}: exists (a ROS2 bag is a folder; choose a new name)")
     store = typestore(ros2)
+    require_free_space(path, sum(24 * len(s) + 4096 for s in streams.values()))
     rosbag = vendor_module("rosbags.rosbag2" if ros2 else "rosbags.rosbag1", "rosbags")
     with atomic_output(path) as tmp:     # a ROS2 bag is a folder: written whole under the temporary name
-        with (rosbag.Writer(tmp, version=8) if ros2 else rosbag.Writer(tmp)) as writer:
-            _write_all(writer, store, streams, message_us, ros2, extra)
+        if not ros2:
+            with rosbag.Writer(tmp) as writer:
+                _write_all(writer, store, streams, message_us, ros2, extra)
+            return path
+        # the writer names its database after the folder: write it as <tmp>/<name>, then lift its files
+        # into <tmp>, so that the bag's files carry the final name (`<name>.db3`), not the temporary one
+        inner = tmp / path.name
+        tmp.mkdir()
+        try:
+            with rosbag.Writer(inner, version=8) as writer:
+                _write_all(writer, store, streams, message_us, ros2, extra)
+        except Exception as exc:       # sqlite's 'database or disk is full' and its kin
+            disk = as_disk_error(exc, path)
+            if disk is None:
+                raise
+            raise disk from None
+        for f in inner.iterdir():
+            os.replace(f, tmp / f.name)
+        inner.rmdir()
     return path
 
 

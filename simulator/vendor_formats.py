@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.fileio import atomic_output
+from common.fileio import atomic_output, require_free_space
 from simulator import evt_codec
 from simulator.events import EventStream, make_events, validate_events
 
@@ -77,10 +77,16 @@ def checked_stream(path: Path, t, x, y, p, width: int, height: int) -> EventStre
 
 # -- Prophesee .raw ----------------------------------------------------------------------------------
 def write_raw(path: str | os.PathLike, stream: EventStream, fmt: str = "evt3") -> Path:
-    """`stream` as a Metavision `.raw` file in EVT 3.0 (`fmt="evt3"`) or EVT 2.0 (`"evt2"`)."""
+    """`stream` as a Metavision `.raw` file in EVT 3.0 (`fmt="evt3"`) or EVT 2.0 (`"evt2"`). A stream
+    whose absolute times the words cannot hold (epoch-stamped recordings) is written relative to its
+    first event, which the header's `% t0 <us>` line keeps (faery's convention; `read_raw` adds it)."""
+    if fmt not in evt_codec.FORMATS:
+        raise ValueError(f"unknown .raw format {fmt!r} (expected evt2 or evt3)")
     path = Path(path)
     ev = stream.events
     t, x, y, p = ev["t"], ev["x"], ev["y"], ev["p"]
+    t0 = evt_codec.time_origin_us(t, fmt)
+    t = t - t0
     try:
         evt_codec.check_encodable(t, x, y, p, stream.width, stream.height,
                                   evt_codec.EVT2_MAX_TIME_US if fmt == "evt2" else None)
@@ -88,18 +94,17 @@ def write_raw(path: str | os.PathLike, stream: EventStream, fmt: str = "evt3") -
         raise FormatError(f"{path}: cannot write {fmt.upper()}: {exc}") from None
     if fmt == "evt3":
         body = evt_codec.encode_evt3(t, x, y, p).astype("<u2") if len(t) else np.empty(0, "<u2")
-    elif fmt == "evt2":
-        body = evt_codec.encode_evt2(t, x, y, p).astype("<u4") if len(t) else np.empty(0, "<u4")
     else:
-        raise ValueError(f"unknown .raw format {fmt!r} (expected evt2 or evt3)")
+        body = evt_codec.encode_evt2(t, x, y, p).astype("<u4") if len(t) else np.empty(0, "<u4")
     with atomic_output(path) as tmp, open(tmp, "wb") as fh:
-        fh.write(evt_codec.raw_header(fmt, stream.width, stream.height))
-        fh.write(body.tobytes())
+        fh.write(evt_codec.raw_header(fmt, stream.width, stream.height, t0_us=t0))
+        data = body.tobytes()
+        fh.write(evt_codec.neutral_lead(fmt, data) + data)
     return path
 
 
-def raw_info(path: str | os.PathLike) -> tuple[str, int, int, int]:
-    """(fmt, width, height, header bytes) of a `.raw` file, from its header."""
+def raw_info(path: str | os.PathLike) -> evt_codec.RawHeader:
+    """The header of a `.raw` file (format, sensor size, header bytes, `% t0`)."""
     path = Path(path)
     with open(path, "rb") as fh:
         head = fh.read(1 << 16)
@@ -109,22 +114,53 @@ def raw_info(path: str | os.PathLike) -> tuple[str, int, int, int]:
         raise FormatError(str(exc)) from None
 
 
+@contextlib.contextmanager
+def _plain_header(path: Path, info: evt_codec.RawHeader):
+    """`path`, or a copy a decoder reads right when it is not: the header closed by `% end` (faery writes
+    none), and a neutral word first when the first word's first byte is '%' (which expelliarmus takes
+    for a header line, even after `% end`, and then hangs or drops events)."""
+    with open(path, "rb") as src:
+        src.seek(info.offset)
+        first = src.read(1)
+        if info.has_end and first != b"%":
+            yield path
+            return
+        with tempfile.TemporaryDirectory() as tmp:
+            copy = Path(tmp) / "events.raw"
+            src.seek(0)
+            with open(copy, "wb") as dst:
+                dst.write(src.read(info.offset) + (b"" if info.has_end else b"% end\n"))
+                dst.write(evt_codec.neutral_lead(info.fmt, first))
+                shutil.copyfileobj(src, dst)
+            yield copy
+
+
 def read_raw(path: str | os.PathLike) -> EventStream:
-    """A `.raw` EVT 3.0 file (decoded by `evt3`) or EVT 2.0 file (decoded by `expelliarmus`)."""
+    """A `.raw` EVT 3.0 file (decoded by `evt3`) or EVT 2.0 file (decoded by `expelliarmus`); times
+    absolute (the header's `% t0` added)."""
     path = Path(path)
-    fmt, width, height, offset = raw_info(path)
-    size = path.stat().st_size - offset
+    info = raw_info(path)
+    fmt, width, height = info.fmt, info.width, info.height
+    size = path.stat().st_size - info.offset
     word = 2 if fmt == "evt3" else 4
     if size % word:
         raise FormatError(f"{path}: {size} bytes of {fmt.upper()} words is not a whole number of {word}-byte words "
                           "(a truncated file?)")
+    if size == 0:                 # a header-only file: an empty stream (decoders return None for it)
+        return checked_stream(path, [], [], [], [], width, height)
     if fmt == "evt3":
-        ev = vendor_module("evt3", "evt3").decode_file(str(path))
-        return checked_stream(path, ev.t, ev.x, ev.y, np.where(np.asarray(ev.p) > 0, 1, -1), width, height)
+        with open(path, "rb") as fh:
+            fh.seek(info.offset)
+            ev = vendor_module("evt3", "evt3").decode_bytes(fh.read(), width, height)
+        return checked_stream(path, np.asarray(ev.t, np.int64) + info.t0_us, ev.x, ev.y,
+                              np.where(np.asarray(ev.p) > 0, 1, -1), width, height)
     wizard = vendor_module("expelliarmus", "expelliarmus").Wizard(encoding="evt2")
-    with _named(path, ".raw") as named:       # expelliarmus reads only names ending in .raw
+    with _plain_header(path, info) as whole, _named(whole, ".raw") as named:   # expelliarmus reads only .raw names
         arr = wizard.read(str(named))
-    return checked_stream(path, arr["t"], arr["x"], arr["y"], np.where(arr["p"] > 0, 1, -1), width, height)
+    if arr is None:
+        arr = {k: np.empty(0, np.int64) for k in "txyp"}
+    return checked_stream(path, np.asarray(arr["t"], np.int64) + info.t0_us, arr["x"], arr["y"],
+                          np.where(arr["p"] > 0, 1, -1), width, height)
 
 
 # -- iniVation AEDAT4 --------------------------------------------------------------------------------
@@ -135,6 +171,7 @@ def write_aedat4(path: str | os.PathLike, stream: EventStream, camera_name: str 
     """`stream` as an AEDAT4 file (one event stream `events`, written by dv-processing)."""
     dv = vendor_module("dv_processing", "dv-processing")
     path = Path(path)
+    require_free_space(path, 16 * len(stream) + 4096)    # dv-processing aborts the process on a full disk
     store = dv.EventStore()
     ev = stream.events
     push = store.push_back

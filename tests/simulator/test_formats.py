@@ -214,10 +214,10 @@ def test_bad_recordings_get_one_line_and_leave_nothing(tmp_path):
 
 def test_header_parsing():
     head = evt_codec.raw_header("evt2", 640, 480)
-    assert evt_codec.parse_raw_header(head + b"\x00\x00\x00\x00") == ("evt2", 640, 480, len(head))
+    assert evt_codec.parse_raw_header(head + b"\x00\x00\x00\x00") == ("evt2", 640, 480, len(head), 0, True)
     # a Metavision-style header with only the geometry and evt lines
     other = b"% evt 3.0\n% geometry 1280x720\n% serial_number 00ca\n% end\n"
     assert evt_codec.parse_raw_header(other)[:3] == ("evt3", 1280, 720)
-    with pytest.raises(evt_codec.EvtFormatError, match="no end"):
+    with pytest.raises(evt_codec.EvtFormatError, match="not a text line ending in a line break"):
         evt_codec.parse_raw_header(b"% evt 3.0")
     assert struct.calcsize("<I") == 4

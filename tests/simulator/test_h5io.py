@@ -153,6 +153,7 @@ def test_e2vid_text_writes_negative_times_as_computed_by_hand(tmp_path):
     assert [parse_seconds(v) for v in ("-0.001939", "2", "1.5", "+0.25", ".5")] == [-1939, 2_000_000, 1_500_000,
                                                                                  250_000, 500_000]
     assert seconds_text(-1) == "-0.000001"
-    for bad in ("1.0000001", "abc", "-", "1e-3"):
+    assert parse_seconds("17179.869182999999") == 17_179_869_183 and parse_seconds("1.0000004") == 1_000_000
+    for bad in ("abc", "-", "1e-3", "1.5.2"):
         with pytest.raises(ValueError):
             parse_seconds(bad)

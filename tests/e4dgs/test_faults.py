@@ -1,0 +1,132 @@
+"""Faults users meet: an output that would land on an input, a full disk under every writer (a real
+tmpfs where the machine lets us mount one), and refusals that come before any work."""
+import subprocess
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from e4dgs.cli import main
+from simulator import formats
+from simulator.events import EventStream, make_events
+from simulator.h5io import write_events
+
+
+def stream(n: int, start_us: int = 0, seed: int = 0) -> EventStream:
+    rng = np.random.default_rng(seed)
+    t = start_us + np.sort(rng.integers(0, 1_000_000, n))
+    return EventStream(make_events(t, rng.integers(0, 346, n), rng.integers(0, 260, n), rng.choice([-1, 1], n)), 346, 260)
+
+
+def run(argv, capsys) -> tuple[int, str]:
+    try:
+        rc = main([str(a) for a in argv])
+    except SystemExit as exc:
+        rc = 1 if exc.code not in (0, None) else 0
+        if isinstance(exc.code, str):
+            print(exc.code, file=__import__("sys").stderr)
+    err = capsys.readouterr().err
+    return rc, err
+
+
+@pytest.fixture
+def frames(tmp_path):
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(4):
+        cv2.imwrite(str(folder / f"{k:03d}.png"), rng.integers(0, 255, (26, 34, 3), dtype=np.uint8))
+    return folder
+
+
+def test_simulate_never_writes_a_sibling_output_over_its_timestamps(frames, tmp_path, capsys):
+    ts = tmp_path / "ts.txt"
+    ts.write_text("0\n1000\n2000\n3000\n")
+    rc, err = run(["simulate", "--frames", frames, "--timestamps", ts, "--out", tmp_path / "ts.h5", "--format", "txt"], capsys)
+    assert rc == 1 and "--format txt (written beside --out)" in err and "is also --timestamps" in err
+    assert ts.read_text() == "0\n1000\n2000\n3000\n" and not (tmp_path / "ts.h5").exists()
+
+
+@pytest.mark.parametrize("argv", [
+    lambda d: ["import", d / "rec.h5", "--out", d / "rec.h5"],
+    lambda d: ["export", d / "rec.h5", "--format", "h5", "--out", d / "rec.h5"],
+    lambda d: ["view", d / "rec.h5", "--out", d / "rec.h5"],
+    lambda d: ["simulate", "--frames", d / "frames", "--fps", "1000", "--out", d / "cfg.h5", "--format", "txt",
+               "--config", d / "cfg.txt"],
+    lambda d: ["e2vid", "--events", d / "rec.h5", "--out", d / "rec.h5"],
+], ids=["import", "export", "view", "simulate-config", "e2vid"])
+def test_an_output_on_an_input_is_refused_before_any_work(argv, frames, tmp_path, capsys):
+    write_events(tmp_path / "rec.h5", stream(100))
+    (tmp_path / "cfg.txt").write_text("contrast_threshold: 0.2\n")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    rc, err = run(argv(tmp_path), capsys)
+    assert rc == 1 and ("an input" in err or "input folder" in err or "is the" in err), err
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_simulate_refuses_an_existing_ros2_bag_before_writing_anything(frames, tmp_path, capsys):
+    (tmp_path / "ev_rosbag2").mkdir()
+    rc, err = run(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "ev.h5", "--format", "rosbag2"],
+                  capsys)
+    assert rc == 1 and "ev_rosbag2 exists" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev_rosbag2", "frames"]
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 1 MiB tmpfs (root can mount one; elsewhere the tests skip)."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.decode(errors='replace').strip()}")
+    yield disk
+    subprocess.run(["umount", str(disk)], check=True)
+
+
+@pytest.mark.parametrize("fmt", formats.FORMATS)
+def test_a_full_disk_under_every_export_names_the_file_and_leaves_nothing(fmt, small_disk, tmp_path, capsys):
+    src = write_events(tmp_path / "big.h5", stream(300_000, start_us=1_700_000_000_000_000))
+    out = small_disk / f"x{formats.SUFFIX[fmt]}"
+    rc, err = run(["export", src, "--format", fmt, "--out", out], capsys)
+    assert rc == 1 and f"{out}: No space left on device" in err, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert list(small_disk.iterdir()) == []
+
+
+def test_a_full_disk_under_import_simulate_and_view(frames, small_disk, tmp_path, capsys):
+    src = write_events(tmp_path / "big.h5", stream(300_000))
+    rc, err = run(["import", src, "--out", small_disk / "y.h5"], capsys)
+    assert rc == 1 and f"{small_disk / 'y.h5'}: No space left on device" in err
+    rc, err = run(["view", src, "--out", small_disk / "v.mp4", "--window", "2ms", "--scale", "4"], capsys)
+    assert rc == 1 and f"{small_disk / 'v.mp4'}: No space left on device" in err, err
+    assert list(small_disk.iterdir()) == []
+    big = tmp_path / "bigframes"
+    big.mkdir()
+    rng = np.random.default_rng(1)
+    for k in range(30):
+        cv2.imwrite(str(big / f"{k:03d}.png"), rng.integers(0, 255, (260, 346, 3), dtype=np.uint8))
+    rc, err = run(["simulate", "--frames", big, "--fps", "1000", "--out", small_disk / "s.h5"], capsys)
+    assert rc == 1 and "No space left on device" in err and str(small_disk) in err, err
+
+
+def test_a_premultiplied_rgba_exr_is_refused_like_an_rgba_png(tmp_path):
+    """score used to drop alpha from EXR renders and score premultiplied colours (15.79 dB for renders
+    worth 25.10); an opaque alpha is still fine."""
+    import OpenEXR
+
+    from benchmark.score import RenderError, read_render
+
+    rgb = np.full((6, 8, 3), 0.5, np.float32)
+    for alpha, ok in ((np.ones((6, 8), np.float32), True), (np.linspace(0, 1, 48, dtype=np.float32).reshape(6, 8), False)):
+        chans = {c: np.ascontiguousarray(rgb[..., i] * alpha) for i, c in enumerate("RGB")}
+        chans["A"] = alpha
+        path = tmp_path / f"r{int(ok)}.exr"
+        with OpenEXR.File({"type": OpenEXR.scanlineimage}, chans) as f:
+            f.write(str(path))
+        if ok:
+            assert np.allclose(read_render(path, 8, 6, 3), 0.5)
+        else:
+            with pytest.raises(RenderError, match="has transparent pixels .* composite it over its background"):
+                read_render(path, 8, 6, 3)
