@@ -117,7 +117,10 @@ def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | No
     """One attempt of a job on a worker: announce it, limit its threads, send its output to the job's
     log, re-raise errors."""
     if tracker is not None:
-        tracker.started.remote(key)
+        try:                  # the progress actor may be gone (killed for memory): that costs the display only
+            tracker.started.remote(key)
+        except Exception:     # noqa: BLE001
+            pass
     if threads is not None:
         limit_threads(threads)
     if log_path is None:
@@ -192,7 +195,8 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
     if not specs:
         return outcomes
     with ray_session(opts) as ray:
-        tracker = ray.remote(num_cpus=0)(_Tracker).remote()
+        # restarted if killed (by Ray's memory monitor, say): its count starts again, the grid goes on
+        tracker = ray.remote(num_cpus=0, max_restarts=-1)(_Tracker).options(name=tracker_name()).remote()
         remote = ray.remote(run_logged)
         pending = {}
         for s in specs:
@@ -209,16 +213,30 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                     spec = pending.pop(ref)
                     try:
                         outcome = TaskOutcome(spec.key, value=ray.get(ref))
-                    except ray.exceptions.RayError as exc:
+                    except Exception as exc:     # noqa: BLE001 - any failure of one task is that task's outcome
                         outcome = TaskOutcome(spec.key, error=_one_line(exc))
                         failed += 1
                     outcomes.append(outcome)
                     with tqdm.external_write_mode():          # the caller's log lines above the bar
                         on_outcome(outcome)
                     bar.update(1)
-                started = ray.get(tracker.started_keys.remote())
-                running = sum(s.key in started for s in pending.values())
+                running = _running(ray, tracker, pending)
                 status = f"done {len(outcomes) - failed}, running {running}, failed {failed}"
                 if status != getattr(bar, "postfix", None):   # redraw on a change only: a log gets a line
                     bar.set_postfix_str(status)                # per change, not one per second of polling
     return outcomes
+
+
+def tracker_name() -> str:
+    """The progress actor's name (one per driver process)."""
+    return f"e4dgs-taskpool-tracker-{os.getpid()}"
+
+
+def _running(ray, tracker, pending: dict) -> str:
+    """How many pending tasks have started ('?' while the progress actor is unreachable: it may have
+    been killed and be restarting; progress display is all it costs)."""
+    try:
+        started = ray.get(tracker.started_keys.remote(), timeout=5.0)
+    except Exception:      # noqa: BLE001
+        return "?"
+    return str(sum(s.key in started for s in pending.values()))

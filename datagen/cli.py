@@ -36,8 +36,8 @@ def add_dataset_parser(sub) -> None:
 def own_scene_args(files: list[Path], configs: list[Path], kind: str) -> dict[str, list[str]]:
     """--scene-file / --scene-config: each scene's name and its worker's arguments; one line for a
     YAML without a name, or two sources with one name (they would write one folder)."""
-    from common.config import read_yaml_mapping
-    from datagen.config import file_scene_name
+    from common.config import ConfigError, read_yaml_mapping
+    from datagen.config import builtin_builder, file_scene_name, resolve_scene
 
     args: dict[str, list[str]] = {}
 
@@ -54,6 +54,14 @@ def own_scene_args(files: list[Path], configs: list[Path], kind: str) -> dict[st
         name = read_yaml_mapping(cfg).get("name")
         if not isinstance(name, str) or not name:
             raise SystemExit(f"error: {cfg}: name: expected the scene's name")
+        try:
+            parsed = resolve_scene(name, scene_file=cfg)
+            if not parsed.source.file:
+                builtin_builder(parsed, cfg)
+            elif not Path(parsed.source.file).is_file():
+                raise SystemExit(f"error: {cfg}: source.file: {parsed.source.file}: no such file")
+        except ConfigError as exc:
+            raise SystemExit(f"error: {exc}") from None
         add(name, ["--scene", name, "--scene-config", str(cfg)], cfg)
     for f in files:
         add(file_scene_name(f), ["--scene-file", str(f), "--kind", kind], f)

@@ -44,6 +44,20 @@ def file_scene_name(path: Path) -> str:
     return re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem) or "scene"
 
 
+def builtin_builder(cfg: SceneConfig, source: str | Path = "scene") -> str:
+    """The built-in builder module of a scene built in code (source.builtin, else its name); ConfigError
+    naming `source` when there is none (a scene YAML copied under a new name without saying which)."""
+    builder = cfg.source.builtin or cfg.name
+    if not (SCENES_DIR / f"{builder}.py").exists():
+        known = ", ".join(SCENE_NAMES)
+        if cfg.source.builtin:
+            raise ConfigError(f"{source}: source.builtin: {builder!r} is not a built-in scene (built-in: {known})")
+        raise ConfigError(f"{source}: {cfg.name!r} is not a built-in scene (built-in: {known}); a scene YAML under its "
+                          f"own name says what it is made from: source: {{builtin: cubes}} for a variant of a "
+                          "built-in scene, or source: {file: my_scene.blend} for your own scene")
+    return builder
+
+
 def scene_yaml_path(name: str) -> Path:
     if name not in SCENE_NAMES and not (SCENES_DIR / f"{name}.yaml").exists():
         raise ConfigError(f"unknown scene {name!r}: expected one of {', '.join(SCENE_NAMES)}")

@@ -185,7 +185,7 @@ def build_scene(cfg: SceneConfig, intr: Intrinsics) -> list:
     _TIME_MAP[:] = [1.0, float(ANIM_FRAMES)]
     reset_scene()
     setup_render(cfg)
-    importlib.import_module(f"blender_scenes.{cfg.name}").build(cfg)
+    importlib.import_module(f"blender_scenes.{cfg.source.builtin or cfg.name}").build(cfg)
     consolidate()  # fewer, larger objects render faster in Workbench
     return make_cameras(cfg.camera.n_cameras, intr)
 

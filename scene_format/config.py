@@ -209,6 +209,9 @@ class SourceConfig:
     animated bounding box (around it for kind object, inside it for kind room); `config` keeps camera:
     as written. `cameras` names camera objects of the file to film with instead of the rig."""
     file: str = ""
+    # built in code: the built-in scene whose builder (blender_scenes/<builtin>.py) makes this one, for a
+    # scene YAML copied under a new name (`name: my_cubes`, `source: {builtin: cubes}`); "" = its name
+    builtin: str = ""
     frame_start: float | None = None
     frame_end: float | None = None
     fps: float | None = None
@@ -217,6 +220,10 @@ class SourceConfig:
     cameras: tuple[str, ...] = ()
 
     def __post_init__(self):
+        if self.file and self.builtin:
+            raise ConfigError(f"builtin: {self.builtin!r} and file: {self.file!r}: a scene comes from one; keep one")
+        if self.builtin and not self.builtin.replace("_", "").isalnum():
+            raise ConfigError(f"builtin: expected a built-in scene's name, got {self.builtin!r}")
         if self.file and not self.file.lower().endswith(SCENE_FILE_SUFFIXES):
             raise ConfigError(f"file: {self.file!r} is not a format Blender imports headless here "
                               f"(expected {', '.join(SCENE_FILE_SUFFIXES)})")

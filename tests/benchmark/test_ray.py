@@ -289,3 +289,27 @@ def test_limit_threads_leaves_numba_able_to_compile():
     env["NUMBA_NUM_THREADS"] = "2"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+
+
+def test_losing_the_progress_actor_costs_the_display_never_the_grid(tmp_path, local_ray, capsys):
+    """Ray's memory monitor killed the tracking actor in a `make benchmark` beside a memory-hungry process
+    and `e4dgs bench` died with it; now the tasks still finish and every outcome arrives."""
+    import ray
+
+    from common.argtypes import positive_int
+    from common.taskpool import tracker_name
+
+    seen = []
+
+    def kill_tracker(outcome):
+        seen.append(outcome)
+        if len(seen) == 1:
+            ray.kill(ray.get_actor(tracker_name()), no_restart=True)
+
+    specs = [TaskSpec("quick", positive_int, ("1",), log_path=tmp_path / "q.log"),
+             TaskSpec("nap", time.sleep, (4.0,), log_path=tmp_path / "n.log"),
+             TaskSpec("later", positive_int, ("3",), log_path=tmp_path / "l.log")]
+    outcomes = run_tasks(specs, RayOptions(retries=1), kill_tracker, progress=True)
+    assert sorted(o.key for o in outcomes) == ["later", "nap", "quick"] and all(o.ok for o in outcomes)
+    assert {o.key: o.value for o in outcomes} == {"quick": 1, "nap": None, "later": 3}
+    assert "running ?" in capsys.readouterr().err          # the display says it lost count, and goes on

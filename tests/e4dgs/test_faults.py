@@ -130,3 +130,35 @@ def test_a_premultiplied_rgba_exr_is_refused_like_an_rgba_png(tmp_path):
         else:
             with pytest.raises(RenderError, match="has transparent pixels .* composite it over its background"):
                 read_render(path, 8, 6, 3)
+
+
+def test_a_scene_yaml_copied_under_a_new_name_says_what_to_add(tmp_path, capsys):
+    """`name: my_cubes` without a source ended in a ModuleNotFoundError traceback inside the worker."""
+    from datagen.config import SCENES_DIR
+
+    text = (SCENES_DIR / "cubes.yaml").read_text().replace("name: cubes", "name: my_cubes")
+    mine = tmp_path / "my_cubes.yaml"
+    mine.write_text(text)
+    rc, err = run(["dataset", "--preset", "tiny", "--scene-config", mine, "--out", tmp_path / "data"], capsys)
+    assert rc == 1 and "'my_cubes' is not a built-in scene" in err and "source: {builtin: cubes}" in err
+    assert "Traceback" not in err and not (tmp_path / "data").exists()
+    (tmp_path / "gone.yaml").write_text("name: gone\nkind: object\nsource:\n  file: /nowhere/gone.blend\n")
+    rc, err = run(["dataset", "--preset", "tiny", "--scene-config", tmp_path / "gone.yaml", "--out", tmp_path / "data"],
+                  capsys)
+    assert rc == 1 and "source.file: /nowhere/gone.blend: no such file" in err and not (tmp_path / "data").exists()
+    mine.write_text(text + "source:\n  builtin: nope\n")
+    rc, err = run(["dataset", "--preset", "tiny", "--scene-config", mine, "--out", tmp_path / "data"], capsys)
+    assert rc == 1 and "source.builtin: 'nope' is not a built-in scene" in err
+
+
+def test_a_renamed_variant_of_a_built_in_scene_builds_from_its_builder(tmp_path, capsys):
+    pytest.importorskip("bpy")
+    from datagen.config import SCENES_DIR
+    from scene_format.reader import SceneDataset
+
+    mine = tmp_path / "my_cubes.yaml"
+    mine.write_text((SCENES_DIR / "cubes.yaml").read_text().replace("name: cubes", "name: my_cubes")
+                    + "source:\n  builtin: cubes\n")
+    assert main(["dataset", "--preset", "tiny", "--scene-config", str(mine), "--out", str(tmp_path / "data")]) == 0
+    ds = SceneDataset(tmp_path / "data" / "my_cubes")
+    assert ds.config.name == "my_cubes" and ds.config.source.builtin == "cubes" and ds.n_cameras > 0
