@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import add_ray_arguments, name_list, ray_options
+from common.argtypes import add_ray_arguments, float_in, name_list, ray_options
 from common.fileio import output_inside_input
 
 
@@ -83,7 +83,7 @@ def add_score_parser(sub) -> None:
     p.add_argument("--inputs", required=True, choices=("events", "rgb", "events+rgb"),
                    help="what the method saw: events-only renders are gray, scored after the log gain / offset")
     p.add_argument("--label", default="", help="its name in the tables (default: --name)")
-    p.add_argument("--train-seconds", type=float, default=None, help="training wall-clock seconds per scene")
+    p.add_argument("--train-seconds", type=float_in(0.0, 1e9, "seconds"), default=None, help="training wall-clock seconds per scene")
     p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<dataset folder name>)")
     p.add_argument("--lpips", default=None, choices=("vgg", "alex", "none"),
                    help="LPIPS network (default: the preset's, from <out>/bench.json; else vgg)")

@@ -15,18 +15,51 @@ def _number(kind, text: str):
     return value
 
 
+MAX_COUNT = 10 ** 9       # no count, size or duration an option takes means anything beyond a billion
+MAX_NUMBER = 1e9
+
+
 def positive_int(text: str) -> int:
     value = _number(int, text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    if not 1 <= value <= MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"expected an integer in 1 .. {MAX_COUNT:,}, got {text!r}")
     return value
 
 
 def nonnegative_int(text: str) -> int:
     value = _number(int, text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    if not 0 <= value <= MAX_COUNT:
+        raise argparse.ArgumentTypeError(f"expected an integer in 0 .. {MAX_COUNT:,}, got {text!r}")
     return value
+
+
+def int_in(lo: int, hi: int, what: str = "") -> "callable":
+    """An argparse type: an integer in lo .. hi (`what` says what it counts, for the message)."""
+    def parse(text: str) -> int:
+        value = _number(int, text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer in {lo:,} .. {hi:,}{f' ({what})' if what else ''}, "
+                                             f"got {text!r}")
+        return value
+    parse.__name__ = f"int_in_{lo}_{hi}"
+    parse.bounds = (lo, hi)
+    return parse
+
+
+def float_in(lo: float, hi: float, what: str = "") -> "callable":
+    """An argparse type: a finite number in [lo, hi]."""
+    def parse(text: str) -> float:
+        value = _number(float, text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected a number in {lo:g} .. {hi:g}{f' ({what})' if what else ''}, "
+                                             f"got {text!r}")
+        return value
+    parse.__name__ = f"float_in_{lo:g}_{hi:g}"
+    parse.bounds = (lo, hi)
+    return parse
+
+
+port_int = int_in(0, 65535, "a TCP port; 0 picks a free one")
 
 
 SEED_MAX = 2 ** 63 - 1      # what the generators take and HDF5 / JSON store as a 64-bit integer
@@ -38,6 +71,9 @@ def seed_int(text: str) -> int:
     if not 0 <= value <= SEED_MAX:
         raise argparse.ArgumentTypeError(f"expected an integer seed in 0 .. {SEED_MAX}, got {text!r}")
     return value
+
+
+seed_int.bounds = (0, SEED_MAX)
 
 
 def name_list(text: str) -> list[str]:
@@ -52,9 +88,12 @@ def name_list(text: str) -> list[str]:
 
 def positive_float(text: str) -> float:
     value = _number(float, text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    if not 0 < value <= MAX_NUMBER:
+        raise argparse.ArgumentTypeError(f"expected a positive number up to {MAX_NUMBER:g}, got {text!r}")
     return value
+
+
+positive_int.bounds, nonnegative_int.bounds, positive_float.bounds = (1, MAX_COUNT), (0, MAX_COUNT), (0.0, MAX_NUMBER)
 
 
 def add_ray_arguments(p: argparse.ArgumentParser, what: str) -> None:

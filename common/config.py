@@ -127,6 +127,23 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
     raise TypeError(f"{path}: unsupported config field type {tp!r}")
 
 
+MAX_ITERATIONS = 10_000_000       # steps of any schedule: 200x the paper's 50,000 (days on any machine)
+SEED_RANGE = (0, 2 ** 63 - 1, "a 64-bit seed")
+
+
+def check_bounds(obj: Any) -> None:
+    """ConfigError naming the first field outside its range in the class's `BOUNDS` ({field: (lo, hi,
+    why)}, inclusive, None = open): every size, count and rate gets a range that follows from what it
+    means, so a typo (fourier: 1000000) is refused before it allocates 24 GB."""
+    for name, (lo, hi, why) in getattr(type(obj), "BOUNDS", {}).items():
+        value = getattr(obj, name)
+        if value is None or isinstance(value, bool):
+            continue
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            span = f"{'-inf' if lo is None else f'{lo:g}'} .. {'inf' if hi is None else f'{hi:g}'}"
+            raise ConfigError(f"{name}: expected {span} ({why}), got {shown(value)}")
+
+
 def _field_default(field: dataclasses.Field) -> Any:
     if field.default is not dataclasses.MISSING:
         return field.default
@@ -165,7 +182,9 @@ def from_dict(cls: type[T], data: Mapping[str, Any], path: str = "", base: Any =
         elif base is not None:
             kwargs[name] = default
     try:
-        return cls(**kwargs)
+        obj = cls(**kwargs)
+        check_bounds(obj)
+        return obj
     except ConfigError as exc:
         raise ConfigError(f"{prefix}{exc}") from None
 

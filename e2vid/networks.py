@@ -258,3 +258,10 @@ class Reconstructor:
         img, self.states = self.net(x, self.states)
         h, w = voxel.shape[-2:]
         return img[0, 0, t:t + h, l:l + w].clamp(0, 1)
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+NetConfig.BOUNDS = {
+    "num_bins": (1, 64, "voxel bins"), "base_num_channels": (1, 1024, "channels"), "num_encoders": (0, 8, "encoders"),
+    "num_residual_blocks": (0, 64, "blocks"), "kernel_size": (1, 15, "pixels"),
+}

@@ -203,3 +203,12 @@ def make_batch(seeds: list[int], cfg: SynthConfig) -> Sequence:
     # [T, N, ...]: time first, as the recurrent loop consumes it
     return Sequence(torch.stack([s.voxels for s in seqs], 1), torch.stack([s.targets for s in seqs], 1),
                     torch.stack([s.flow for s in seqs], 1), np.stack([s.n_events for s in seqs], 1))
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+SynthConfig.BOUNDS = {
+    "height": (1, 4096, "pixels"), "width": (1, 4096, "pixels"), "n_steps": (1, 100_000, "frames a sequence"),
+    "substeps": (1, 1000, "simulator steps a frame"), "fps": (1e-3, 1e6, "frames per second"), "num_bins": (1, 64, "voxel bins"),
+    "max_shift_px": (0.0, 1e4, "pixels"), "max_rotation_deg": (0.0, 360.0, "degrees"), "max_zoom": (0.0, 10.0, "a relative zoom"),
+    "threshold_sigma_max": (0.0, 10.0, "log intensity"), "shot_noise_max_hz": (0.0, 1e6, "events per second a pixel"),
+}

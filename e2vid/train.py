@@ -44,7 +44,7 @@ from e2vid.networks import FIRENET, NetConfig, build_network
 from e2vid.official import save_checkpoint
 from e2vid.synth import VAL_SEED_BASE, Sequence, SynthConfig, make_batch
 from common.checkpoint import torch_load
-from common.config import ConfigError, check_positive, dump_config
+from common.config import MAX_ITERATIONS, SEED_RANGE, ConfigError, check_positive, dump_config
 from common.fileio import atomic_output
 
 
@@ -265,3 +265,16 @@ class E2VIDTrainer:
     def export(self, path: str | Path, report: dict | None = None) -> Path:
         info = {"iterations": self.iteration, "wall_s": round(self.wall_s, 1), "config": asdict(self.cfg)}
         return save_checkpoint(path, self.net, e4dgs_training=json.loads(json.dumps({**info, **(report or {})})))
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+E2VIDTrainConfig.BOUNDS = {
+    "iterations": (1, MAX_ITERATIONS, "iterations"), "batch_size": (1, 4096, "sequences"), "tbptt": (1, 1024, "steps"),
+    "lr": (0.0, 10.0, "a learning rate"), "lr_final": (0.0, 10.0, "a learning rate"), "grad_clip": (0.0, 1e6, "a norm"),
+    "lambda_l1": (0.0, 1e6, "a loss weight"), "lambda_lpips": (0.0, 1e6, "a loss weight"),
+    "lpips_start": (0, MAX_ITERATIONS, "iterations"), "lambda_tc": (0.0, 1e6, "a loss weight"),
+    "tc_alpha": (0.0, 1e6, "the temporal loss's decay"), "seed": SEED_RANGE,
+    "checkpoint_every": (0, MAX_ITERATIONS, "iterations"), "threads": (1, 1024, "threads"),
+    "data_workers": (0, 1024, "processes"), "monitor_every": (0, MAX_ITERATIONS, "iterations"),
+    "monitor_sequences": (0, 10_000, "sequences"),
+}

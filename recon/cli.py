@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common.argtypes import float_in
+
 
 def add_train_parser(sub) -> None:
     p = sub.add_parser("train", help="train a reconstruction method on a generated scene",
@@ -41,7 +43,7 @@ def add_render_parser(sub) -> None:
                                    "recorded trajectory) or a JSON file {K: 3x3, c2w_opencv: 4x4, width, height}.")
     p.add_argument("--model", type=Path, required=True, help="training folder or model .pt file")
     p.add_argument("--camera", default=None, help="camera index, or a JSON camera file")
-    p.add_argument("--t", type=float, nargs="+", default=None, help="normalised times in [0, 1]")
+    p.add_argument("--t", type=float_in(0.0, 1.0, "a normalised time"), nargs="+", default=None, help="normalised times in [0, 1]")
     p.add_argument("--test-views", type=Path, default=None, metavar="SCENE",
                    help="instead of --camera/--t: render every held-out view of this scene folder as "
                         "<out>/cam<k>/<index>.<format>, the layout `e4dgs score` reads")

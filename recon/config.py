@@ -20,7 +20,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Literal
 
-from common.config import ConfigError, check_positive
+from common.config import MAX_ITERATIONS, SEED_RANGE, ConfigError, check_positive
 
 REFERENCE_ITERATIONS = 40_000
 MIN_DENSIFY_INTERVAL = 10
@@ -249,3 +249,38 @@ class TrainConfig:
                                                    min(d.opacity_reset_interval, MIN_OPACITY_RESET_INTERVAL)),
                         position_lr_steps=sc(self.position_lr_steps), deform_lr_steps=sc(self.deform_lr_steps),
                         sh_interval=sc(self.sh_interval))
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+_STEPS = (0, MAX_ITERATIONS, "iterations")
+InitConfig.BOUNDS = {
+    "n_points_object": (1, 10_000_000, "initial Gaussians; 10x a dense 3DGS scene"),
+    "n_points_room": (1, 10_000_000, "initial Gaussians; 10x a dense 3DGS scene"),
+    "cube_half_size": (1e-6, 1e4, "scene units"), "sphere_radius": (1e-6, 1e4, "scene units"),
+    "init_opacity": (0.0, 1.0, "an opacity"), "seed": SEED_RANGE,
+    "carve_candidates": (1, 10_000_000, "points tested"), "carve_times": (1, 1000, "instants"),
+    "carve_window": (0.0, 1.0, "a fraction of the clip"), "carve_min_events": (1, 1000, "events in a 3x3 neighbourhood"),
+    "carve_dilate_px": (0, 64, "pixels"),
+}
+LearningRates.BOUNDS = {name: (0.0, 10.0, "a learning rate") for name in
+                        ("position_init", "position_final", "position_delay_mult", "feature", "opacity", "opacity_final",
+                         "scaling", "rotation")}
+LearningRates.BOUNDS["deform_scale"] = (0.0, 1000.0, "a multiple of the position rate")
+DensifyConfig.BOUNDS = {
+    "start": _STEPS, "stop": _STEPS, "interval": (1, MAX_ITERATIONS, "iterations"), "opacity_reset_interval": (1, MAX_ITERATIONS, "iterations"),
+    "grad_threshold": (0.0, 1e3, "an NDC gradient norm"), "percent_dense": (0.0, 1.0, "a fraction of the scene extent"),
+    "min_opacity": (0.0, 1.0, "an opacity"), "max_screen_size": (0.0, 1e5, "pixels"),
+    "max_world_size": (0.0, 1e3, "a multiple of the scene extent"),
+    "max_gaussians": (1, 20_000_000, "Gaussians; ~6 GB of parameters and Adam state at 20 M"),
+}
+DeformFieldConfig.BOUNDS = {
+    "degree": (0, 16, "polynomial degree of a trajectory"), "fourier": (0, 64, "sine / cosine pairs per trajectory"),
+    "lr_scale": (0.0, 1e3, "a multiple of the means' rate"), "smoothness": (0.0, 1e6, "a loss weight"),
+}
+TrainConfig.BOUNDS = {
+    "iterations": (1, MAX_ITERATIONS, "200x the paper's 50,000"), "schedule_reference": (1, MAX_ITERATIONS, "iterations"),
+    "warm_up": _STEPS, "position_lr_steps": _STEPS, "deform_lr_steps": _STEPS, "sh_degree": (0, 3, "3DGS's SH degrees"),
+    "sh_interval": (1, MAX_ITERATIONS, "iterations"), "seed": SEED_RANGE,
+    "checkpoint_every": (0, MAX_ITERATIONS, "iterations"), "eval_every": _STEPS,
+    "eval_max_views": (0, 100_000, "views"),
+}

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Mapping
 
-from common.config import ConfigError, check_positive, from_dict, read_yaml_mapping
+from common.config import SEED_RANGE, ConfigError, check_positive, from_dict, read_yaml_mapping
 from simulator.config import SimulatorConfig
 
 MAX_RENDER_PIXELS = 4096 * 4096
@@ -273,6 +273,10 @@ class SceneConfig:
             raise ConfigError(f"formats: a format is named twice ({list(self.formats)})")
         if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
             raise ConfigError(f"motion_strength: expected a value >= 0, got {self.motion_strength!r}")
+        if self.duration_s * self.render.fps > MAX_TIMESTAMPS:
+            raise ConfigError(f"duration_s: {self.duration_s:g} s at render.fps {self.render.fps:g} is "
+                              f"{self.duration_s * self.render.fps:.3g} rendered timestamps; at most {MAX_TIMESTAMPS:,} "
+                              "(~2 days of rendering six cameras at the quick preset's pace); shorten the clip or lower the rate")
 
     @property
     def n_timestamps(self) -> int:
@@ -322,3 +326,37 @@ def parse_scene(data: Mapping, path: Path) -> SceneConfig:
 def read_scene_config(path: str | Path) -> SceneConfig:
     """A scene YAML file (a scene folder's scene.yaml, or a scene's own YAML), parsed strictly."""
     return parse_scene(read_scene_yaml(Path(path)), Path(path))
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+MAX_TIMESTAMPS = 1_000_000      # rendered timestamps of one scene (duration_s x render.fps)
+RenderConfig.BOUNDS = {
+    "samples": (0, 64, "Workbench anti-aliasing samples"), "fps": (1e-3, 1e6, "frames per second; times are whole us"),
+    "width": (1, 8192, "pixels"), "height": (1, 8192, "pixels"), "adaptive_px": (0.0, 1000.0, "pixels of motion"),
+    "max_stride": (1, 100_000, "timestamps"),
+}
+ShakeConfig.BOUNDS = {
+    "rms_deg": (0.0, 90.0, "degrees"), "min_hz": (0.0, 1e4, "Hz"), "max_hz": (0.0, 1e4, "Hz"),
+    "components": (0, 64, "sine components"), "roll_scale": (0.0, 100.0, "a multiple of the shake"),
+}
+CameraRigConfig.BOUNDS = {
+    "n_cameras": (1, 64, "cameras"), "radius": (1e-6, 1e4, "scene units"), "height": (-1e4, 1e4, "scene units"),
+    "azimuth0_deg": (-360.0, 360.0, "degrees"), "sweep_deg": (-36000.0, 36000.0, "degrees (100 turns)"),
+    "radius_change": (-1e4, 1e4, "scene units"), "fov_x_deg": (1e-3, 179.0, "degrees"),
+}
+LightingConfig.BOUNDS = {
+    "rotate_z_deg": (-360.0, 360.0, "degrees"), "shadow_intensity": (0.0, 1.0, "a fraction"),
+    "exposure": (-100.0, 100.0, "Blender exposure (EV)"),
+}
+FramesConfig.BOUNDS = {"keep_every": (1, MAX_TIMESTAMPS, "timestamps"), "test_every": (1, MAX_TIMESTAMPS, "kept frames")}
+BlurConfig.BOUNDS = {
+    "tolerance": (0.0, 10.0, "a relative error"), "max_exposure_ms": (0.0, 1e4, "milliseconds"),
+    "sample_stride_px": (1, 10_000, "pixels"),
+}
+SpeedConfig.BOUNDS = {"exposure_ms": (0.0, 1e4, "milliseconds"), "max_px_per_frame": (0.0, 1e4, "pixels")}
+SourceConfig.BOUNDS = {"frame_start": (-1e7, 1e7, "frames"), "frame_end": (-1e7, 1e7, "frames"),
+                       "fps": (1e-3, 1e6, "frames per second")}
+SceneConfig.BOUNDS = {
+    "duration_s": (1e-6, 3600.0, "seconds of clip"), "motion_strength": (0.0, 100.0, "a multiple of the scene's motion"),
+    "seed": SEED_RANGE, "speed": (1.0, 1e4, "a time compression factor"),
+}

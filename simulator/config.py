@@ -103,3 +103,16 @@ class SimulatorConfig:
     def is_noise_free(self) -> bool:
         """No random events (shot noise, hot pixels); leak, mismatch, low-pass, refractory are deterministic."""
         return not (self.has_shot_noise or self.has_hot_pixels)
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+SimulatorConfig.BOUNDS = {
+    "log_eps": (0.0, 1.0, "linear intensity"), "linlog_threshold_dn": (0.0, 65535.0, "digital numbers"),
+    "linlog_dn_per_unit": (1e-6, 65535.0, "digital numbers per linear unit"),
+    "pos_threshold": (0.0, 10.0, "log intensity"), "neg_threshold": (0.0, 10.0, "log intensity"),
+    "threshold_sigma": (0.0, 10.0, "log intensity"), "threshold_min": (0.0, 10.0, "log intensity"),
+    "lowpass_cutoff_hz": (0.0, 1e7, "Hz"), "refractory_us": (0, 10 ** 9, "microseconds (1000 s)"),
+    "leak_rate_hz": (0.0, 1e6, "events per second a pixel"), "leak_rate_sigma_decades": (0.0, 10.0, "decades"),
+    "shot_noise_rate_hz": (0.0, 1e6, "events per second a pixel"), "hot_pixel_fraction": (0.0, 1.0, "a fraction of the pixels"),
+    "hot_pixel_rate_hz": (0.0, 1e6, "events per second a pixel"),
+}

@@ -27,6 +27,7 @@ from tools.bench_render_rate import nearest_time_errors
 from datagen.build import generate_dataset
 from datagen.config import PRESETS_DIR
 from simulator.h5io import read_events
+from tools.tool_cli import output_file, positive_float, positive_int, run_tool
 
 RETRIES = 2           # restarts of a generator that died from a signal
 
@@ -79,11 +80,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="quick")
     ap.add_argument("--scenes", nargs="+", default=["hinge", "lego", "garage"])
-    ap.add_argument("--bounds", type=float, nargs="+", default=[0.5, 1.0, 2.0], help="render.adaptive_px values")
-    ap.add_argument("--max-stride", type=int, default=8)
-    ap.add_argument("--cameras", type=int, default=None, help="cameras per scene (default: the preset's)")
+    ap.add_argument("--bounds", type=positive_float, nargs="+", default=[0.5, 1.0, 2.0], help="render.adaptive_px values")
+    ap.add_argument("--max-stride", type=positive_int, default=8)
+    ap.add_argument("--cameras", type=positive_int, default=None, help="cameras per scene (default: the preset's)")
     ap.add_argument("--out", type=Path, default=None, help="keep the generated scenes here (default: a temporary folder)")
-    ap.add_argument("--json", type=Path, default=None, help="also write the rows as JSON")
+    ap.add_argument("--json", type=output_file, default=None, help="also write the rows as JSON")
     args = ap.parse_args(argv)
     preset = Path(args.preset) if args.preset.endswith((".yaml", ".yml")) else PRESETS_DIR / f"dataset_{args.preset}.yaml"
     if not preset.is_file():
@@ -123,9 +124,10 @@ def main(argv=None) -> int:
               f"{r['events']:,} | {100 * r['count_error']:+.2f} % | {r['median_us']:.1f} / {r['p90_us']:.1f} | "
               f"{100 * r['unmatched']:.2f} % | {blur} | {'identical' if r['sharp_identical'] else 'DIFFER'} |")
     if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({"cpu": cpu, "preset": args.preset, "rows": rows}, indent=1))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

@@ -20,6 +20,7 @@ from datagen.render import render_clip
 from common.config import replace_checked
 from common.color import rec709_luma
 from simulator.simulator import simulate
+from tools.tool_cli import positive_int, run_tool
 
 ENGINES = [("workbench", 8), ("cycles", 1), ("cycles", 16)]
 
@@ -32,7 +33,7 @@ def events_per_second(frames: np.ndarray, t_us: np.ndarray, sensor) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="cubes")
-    ap.add_argument("--frames", type=int, default=90, help="rendered frames at the scene's fps (default 90 = 30 ms)")
+    ap.add_argument("--frames", type=positive_int, default=90, help="rendered frames at the scene's fps (default 90 = 30 ms)")
     ap.add_argument("--preset", default="quick")
     args = ap.parse_args(argv)
     base = resolve_scene(args.scene, load_preset(args.preset).overrides)
@@ -57,4 +58,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

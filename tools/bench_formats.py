@@ -13,6 +13,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from tools.tool_cli import positive_int, run_tool
 
 LIBRARIES = {"h5": ("h5py (ours)", "h5py (ours)"), "aedat4": ("dv-processing", "dv-processing"),
              "evt3": ("ours (simulator.evt_codec)", "evt3"), "evt2": ("ours (simulator.evt_codec)", "expelliarmus"),
@@ -32,7 +33,7 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--events", type=Path, default=Path("data/quick/hinge/events/cam0.h5"))
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=positive_int, default=3)
     ap.add_argument("--formats", nargs="+", default=list(FORMATS), choices=FORMATS)
     args = ap.parse_args(argv)
     if not args.events.exists():
@@ -70,4 +71,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

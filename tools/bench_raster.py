@@ -31,6 +31,7 @@ import numba
 import torch
 
 from recon.raster import Camera, render
+from tools.tool_cli import positive_int, run_tool
 
 
 def make_scene(n: int, seed: int = 0):
@@ -139,10 +140,10 @@ def time_training_states(run_dirs: list[str], factors: list[int], repeats: int) 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", nargs="+", metavar="DIR", help="time the saved states of these training folders")
-    ap.add_argument("--factors", type=int, nargs="+", default=[1, 2, 4], help="coarse-to-fine factors (--runs)")
-    ap.add_argument("--sizes", type=int, nargs="+", default=[20000, 100000])
-    ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--torch-max", type=int, default=20000, help="largest N timed with the slow torch backend")
+    ap.add_argument("--factors", type=positive_int, nargs="+", default=[1, 2, 4], help="coarse-to-fine factors (--runs)")
+    ap.add_argument("--sizes", type=positive_int, nargs="+", default=[20000, 100000])
+    ap.add_argument("--repeats", type=positive_int, default=7)
+    ap.add_argument("--torch-max", type=positive_int, default=20000, help="largest N timed with the slow torch backend")
     ap.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
     args = ap.parse_args(argv)
     if args.runs:
@@ -180,4 +181,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

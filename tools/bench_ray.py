@@ -22,6 +22,7 @@ from benchmark.config import BenchConfig, CellSpec
 from benchmark.runner import run_bench
 from common.config import build_config
 from common.taskpool import RayOptions
+from tools.tool_cli import positive_int, run_tool
 
 
 # the bundled methods' six cells, as in the quick preset
@@ -41,9 +42,9 @@ def tiny_grid(iterations: int, scene: str = "cubes") -> BenchConfig:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--iterations", type=int, default=100)
-    ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--cpus", type=int, default=2, help="CPUs of the local Ray (one per job)")
+    ap.add_argument("--iterations", type=positive_int, default=100)
+    ap.add_argument("--repeats", type=positive_int, default=2)
+    ap.add_argument("--cpus", type=positive_int, default=2, help="CPUs of the local Ray (one per job)")
     ap.add_argument("--data", type=Path, default=Path("data/tiny_motion"), help="tiny_motion dataset root (made if missing)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="bench_ray_") as tmp:
@@ -79,4 +80,4 @@ def _compare(cfg: BenchConfig, args, tmp: Path) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

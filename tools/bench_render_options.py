@@ -24,15 +24,16 @@ from datagen.config import load_preset, resolve_scene
 from datagen.render import render_clip
 from simulator.simulator import simulate
 from tools.bench_render_rate import compare_streams
+from tools.tool_cli import camera_index, int_in, positive_float, run_tool
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="hinge")
     ap.add_argument("--preset", default="paper")
-    ap.add_argument("--duration-ms", type=float, default=40.0)
-    ap.add_argument("--cameras", type=int, nargs="+", default=[0])
-    ap.add_argument("--samples", type=int, nargs="+", default=[1, 5, 8, 16], help="Workbench AA samples to try")
+    ap.add_argument("--duration-ms", type=positive_float, default=40.0)
+    ap.add_argument("--cameras", type=camera_index, nargs="+", default=[0])
+    ap.add_argument("--samples", type=int_in(0, 64, "Workbench samples"), nargs="+", default=[1, 5, 8, 16], help="Workbench AA samples to try")
     ap.add_argument("--shadows", nargs="+", default=["on", "off"], choices=["on", "off"])
     args = ap.parse_args(argv)
     base = resolve_scene(args.scene, load_preset(args.preset).overrides)
@@ -66,4 +67,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

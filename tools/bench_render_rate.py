@@ -19,6 +19,7 @@ from datagen.config import load_preset, resolve_scene
 from datagen.render import render_clip
 from common.color import rec709_luma
 from simulator.simulator import simulate
+from tools.tool_cli import camera_index, int_in, positive_float, run_tool
 
 RATES = (3000, 1500, 750)
 
@@ -58,10 +59,10 @@ def compare_streams(streams: list[np.ndarray], reference: list[np.ndarray], widt
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="lego")
-    ap.add_argument("--duration-ms", type=float, default=40.0)
-    ap.add_argument("--cameras", type=int, nargs="+", default=[0])
+    ap.add_argument("--duration-ms", type=positive_float, default=40.0)
+    ap.add_argument("--cameras", type=camera_index, nargs="+", default=[0])
     ap.add_argument("--preset", default="quick")
-    ap.add_argument("--rates", type=int, nargs="+", default=list(RATES), help="render rates (FPS); the highest is the reference")
+    ap.add_argument("--rates", type=int_in(1, 1_000_000, "frames per second"), nargs="+", default=list(RATES), help="render rates (FPS); the highest is the reference")
     args = ap.parse_args(argv)
     rates = sorted(set(args.rates), reverse=True)
     cfg = resolve_scene(args.scene, load_preset(args.preset).overrides)
@@ -88,4 +89,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from simulator import EventSimulator, SimulatorConfig
+from tools.tool_cli import int_in, positive_int, run_tool
 
 WIDTH, HEIGHT, FPS = 346, 260, 3000
 _EFFECTS = dict(threshold_sigma=0.03, lowpass_cutoff_hz=200.0, refractory_us=100, leak_rate_hz=0.1,
@@ -50,9 +51,9 @@ def run_once(config: SimulatorConfig, frames, t_us, threads: int) -> tuple[float
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=600)
-    ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--frames", type=int_in(2, 1_000_000, "frames"), default=600)
+    ap.add_argument("--repeats", type=positive_int, default=5)
+    ap.add_argument("--threads", type=int_in(1, 1024, "threads"), nargs="+", default=[1, 2])
     args = ap.parse_args(argv)
     threads = [t for t in args.threads if t <= numba.config.NUMBA_NUM_THREADS]
     frames = grating_frames(args.frames)
@@ -84,4 +85,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

@@ -18,6 +18,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
+from tools.tool_cli import positive_int, run_tool
 
 
 def timed(fn, reps: int) -> float:
@@ -95,8 +96,8 @@ def rows(args) -> list[tuple[str, str, float, float]]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="data/quick/hinge_x26.2", help="a scene folder for the event-window row")
-    ap.add_argument("--gaussians", type=int, default=11574, help="model size (bench_train's late state)")
-    ap.add_argument("--reps", type=int, default=15)
+    ap.add_argument("--gaussians", type=positive_int, default=11574, help="model size (bench_train's late state)")
+    ap.add_argument("--reps", type=positive_int, default=15)
     args = ap.parse_args(argv)
     if args.gaussians < 1 or args.reps < 1:
         print("bench_step_rest: --gaussians and --reps must be >= 1", file=sys.stderr)
@@ -118,4 +119,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_tool(main))

@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from tools.tool_cli import positive_int, run_tool
 
 SETTINGS = [(1, None), (1, "PASSIVE"), (2, None), (2, "PASSIVE")]
 
@@ -77,10 +78,10 @@ def main(argv=None) -> int:
         child(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
         return 0
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=5, help="processes per setting (each times --reps passes)")
-    ap.add_argument("--reps", type=int, default=5)
-    ap.add_argument("--points", type=int, nargs="+", default=[1000, 4096], help="MLP sizes (Gaussians)")
-    ap.add_argument("--gaussians", type=int, nargs="+", default=[20000], help="rasterizer sizes")
+    ap.add_argument("--repeats", type=positive_int, default=5, help="processes per setting (each times --reps passes)")
+    ap.add_argument("--reps", type=positive_int, default=5)
+    ap.add_argument("--points", type=positive_int, nargs="+", default=[1000, 4096], help="MLP sizes (Gaussians)")
+    ap.add_argument("--gaussians", type=positive_int, nargs="+", default=[20000], help="rasterizer sizes")
     args = ap.parse_args(argv)
     from common.machine import cpu_summary
 
@@ -108,4 +109,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_tool(main))

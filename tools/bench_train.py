@@ -39,6 +39,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from tools.tool_cli import int_in, nonnegative_int, positive_int, run_tool
 
 PARTS = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd")
 CONFIGS = {"d3dgs": "configs/recon/bench/d3dgs_quick.yaml", "e4dgs": "configs/recon/bench/e4dgs_quick.yaml",
@@ -280,17 +281,17 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", default="data/quick/hinge")
     ap.add_argument("--methods", nargs="+", default=["e4dgs", "e4dgs_rgb", "d3dgs"], choices=sorted(CONFIGS))
     ap.add_argument("--phases", nargs="+", default=["early", "late"], choices=["early", "late"])
-    ap.add_argument("--gaussians", type=int, default=20000, help="initial Gaussians (before pruning)")
-    ap.add_argument("--iters", type=int, default=12, help="timed iterations per cell and tree")
-    ap.add_argument("--threads", type=int, default=1, help="torch and numba threads of each worker")
+    ap.add_argument("--gaussians", type=positive_int, default=20000, help="initial Gaussians (before pruning)")
+    ap.add_argument("--iters", type=positive_int, default=12, help="timed iterations per cell and tree")
+    ap.add_argument("--threads", type=int_in(1, 1024, "threads"), default=1, help="torch and numba threads of each worker")
     ap.add_argument("--against", default=None, metavar="REV", help="also time this git revision's tree")
     ap.add_argument("--precisions", nargs="+", default=None, choices=["auto", "float32", "bfloat16"],
                     help="time this tree's deformation MLP once per train.precision value (default: the configs' own field)")
     ap.add_argument("--fields", nargs="+", default=[], choices=["mlp", "trajectory"],
                     help="also time this tree with train.deform_field.kind set to each of these")
-    ap.add_argument("--coarse", nargs="+", type=int, default=[], metavar="FACTOR",
+    ap.add_argument("--coarse", nargs="+", type=int_in(1, 64, "a coarse factor"), default=[], metavar="FACTOR",
                     help="also time trajectory-field iterations of coarse-to-fine stages rendered at 1/FACTOR size")
-    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--worker", type=nonnegative_int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
         worker(args.worker)
@@ -353,4 +354,4 @@ def main(argv=None) -> int:
 REPO_OF_TREE = Path(os.environ.get("E4DGS_BENCH_TREE", REPO))
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_tool(main))

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 import torch
+from tools.tool_cli import positive_float, positive_int, run_tool
 
 
 def upsampled(model, n: int, seed: int = 0):
@@ -47,8 +48,8 @@ def _wait(pred, timeout_s: float = 60.0) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--run", required=True, help="a trained run folder (its scene must be readable)")
-    ap.add_argument("--gaussians", type=int, default=20000)
-    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--gaussians", type=positive_int, default=20000)
+    ap.add_argument("--seconds", type=positive_float, default=10.0)
     args = ap.parse_args(argv)
     from viewer.app import Viewer
     from viewer.headless import HeadlessChromium
@@ -122,4 +123,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

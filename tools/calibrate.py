@@ -16,6 +16,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from tools.tool_cli import existing_file, run_tool
 
 # The paper's Table 3 (garage): D3DGS 19.05 / 18.89 / 16.98 dB at mild / medium / strong blur,
 # 20.36 dB on sharp frames (Table 1), so these costs in dB.
@@ -59,7 +60,7 @@ def main(argv=None) -> int:
     import json
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("results", type=Path, help="results.jsonl of a bench run with the speed study")
+    ap.add_argument("results", type=existing_file, help="results.jsonl of a bench run with the speed study")
     ap.add_argument("--scene", default="garage")
     args = ap.parse_args(argv)
     try:
@@ -86,4 +87,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

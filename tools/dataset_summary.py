@@ -12,11 +12,12 @@ import json
 from pathlib import Path
 
 from datagen.summary import blur_table, moving_event_table
+from tools.tool_cli import existing_folder, run_tool
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("root", type=Path)
+    ap.add_argument("root", type=existing_folder)
     ap.add_argument("--moving-events", action="store_true", help="the moving pixels' share of the events per scene")
     args = ap.parse_args(argv)
     print(f"dataset {args.root}")
@@ -40,4 +41,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_tool(main))

@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from tools.tool_cli import positive_float, run_tool
 
 SNAPSHOTS = [0.1, 0.25, 0.5, 0.75, 1.0]
 
@@ -54,7 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--method", required=True)
     ap.add_argument("--config", required=True)
     ap.add_argument("--fields", nargs="+", default=["mlp", "trajectory"], choices=["mlp", "trajectory"])
-    ap.add_argument("--scale", type=float, default=1.0, help="budget multiple of the config's iterations")
+    ap.add_argument("--scale", type=positive_float, default=1.0, help="budget multiple of the config's iterations")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", default="runs/field_curves")
     args = ap.parse_args(argv)
@@ -73,4 +74,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_tool(main))

@@ -6,7 +6,7 @@ import signal
 import threading
 from pathlib import Path
 
-from common.argtypes import positive_float
+from common.argtypes import port_int, positive_float
 
 
 def add_viewer_parser(sub) -> None:
@@ -19,17 +19,41 @@ def add_viewer_parser(sub) -> None:
                    help="a scene folder (data/quick/hinge) or run folders (runs/quick/hinge/e4dgs-<hash>, or its "
                         "prefix runs/quick/hinge/e4dgs when only one run matches)")
     p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
-    p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0 picks a free one)")
+    p.add_argument("--port", type=port_int, default=8080, help="port (default 8080; 0 picks a free one)")
     p.add_argument("--slowmo", type=positive_float, default=100.0,
                    help="play back this many times slower than real time (default 100: a 0.1 s clip in 10 s)")
     p.set_defaults(func=run_viewer)
 
 
+def check_host(host: str, timeout_s: float = 3.0) -> None:
+    """--host must be an address of this machine's kind: an IP literal (checked as one: 999.1.1.1 is
+    not) or a name that resolves within timeout_s (a resolver without a network could hang)."""
+    import ipaddress
+    import re
+    import socket
+    from concurrent.futures import ThreadPoolExecutor, TimeoutError as FutureTimeout
+
+    if re.fullmatch(r"[0-9.]+|[0-9a-fA-F:]*:[0-9a-fA-F:.]*", host):
+        try:
+            ipaddress.ip_address(host)
+        except ValueError:
+            raise SystemExit(f"error: --host {host}: not an IP address") from None
+        return
+    pool = ThreadPoolExecutor(1)
+    try:
+        pool.submit(socket.getaddrinfo, host, None).result(timeout=timeout_s)
+    except FutureTimeout:
+        raise SystemExit(f"error: --host {host}: the name did not resolve within {timeout_s:g} s") from None
+    except OSError as exc:
+        raise SystemExit(f"error: --host {host}: unknown host ({exc.strerror or exc})") from None
+    finally:
+        pool.shutdown(wait=False)
+
+
 def run_viewer(args: argparse.Namespace) -> int:
     from viewer.sources import open_source
 
-    if not 0 <= args.port <= 65535:
-        raise SystemExit(f"error: --port: expected 0..65535, got {args.port}")
+    check_host(args.host)
     sources = [open_source(p) for p in args.paths]          # a bad path: one line, before the server starts
     if len(sources) > 1 and any(s.model is None for s in sources):
         raise SystemExit("error: several paths must all be runs (a dataset is shown alone, or beside a run "

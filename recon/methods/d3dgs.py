@@ -81,3 +81,7 @@ class D3DGS(Method):
             out.means2d.retain_grad()
         loss = photometric_loss(out.image, coarse_srgb(view.image, f), self.cfg.lambda_dssim)
         return loss, [(out, camera)]
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+D3DGSConfig.BOUNDS = {"lambda_dssim": (0.0, 1.0, "D-SSIM's share of the photometric loss")}

@@ -96,3 +96,10 @@ class DeblurD3DGS(Method):
             if out.means2d.requires_grad:
                 out.means2d.retain_grad()
         return loss, list(zip(outs, cameras))
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+DeblurD3DGSConfig.BOUNDS = {
+    "blur_samples": (1, 255, "renders per blurred frame"), "lambda_dssim": (0.0, 1.0, "D-SSIM's share of the loss"),
+    "lambda_lowres": (0.0, 1e6, "a loss weight"), "lowres_factor": (1, 64, "pixels a block side"),
+}

@@ -85,3 +85,9 @@ class E2VIDD3DGS(D3DGS):
     @classmethod
     def correction(cls, cfg: E2VIDD3DGSConfig):
         return (lambda pred, gt: correct_colors(pred, gt)[0]) if cfg.color_correct else None
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+E2VIDD3DGSConfig.BOUNDS = {
+    "events_per_window": (0, 100_000_000, "events; 0 never splits"), "lambda_dssim": (0.0, 1.0, "D-SSIM's share of the loss"),
+}

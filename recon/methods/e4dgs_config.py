@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from common.config import ConfigError, check_positive
+from common.config import MAX_ITERATIONS, ConfigError, check_positive
 from recon.config import DensifyConfig, InitConfig, TrainConfig
 
 
@@ -92,3 +92,18 @@ class E4DGSConfig:
 
     def __post_init__(self):
         check_positive(self, "rgb_samples", "rgb_every")
+
+
+# Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).
+EventConfig.BOUNDS = {
+    "noise_sigma": (0.0, 10.0, "log intensity"), "max_window_fraction": (0.0, 1.0, "a fraction of the clip"),
+    "views_per_step": (1, 64, "cameras per step"), "c_init": (1e-6, 10.0, "a contrast threshold (log intensity)"),
+    "c_lr": (0.0, 10.0, "a learning rate"), "recon_eps": (0.0, 1.0, "the Charbonnier epsilon"),
+    "lambda_recon": (0.0, 1e6, "a loss weight"), "lambda_tv": (0.0, 1e6, "a loss weight"),
+    "iip_threshold": (0.0, 1.0, "a compositing weight"), "iip_start": (0, MAX_ITERATIONS, "iterations"),
+    "iip_interval": (1, MAX_ITERATIONS, "iterations"), "iip_times": (0, 1000, "timestamps"),
+}
+E4DGSConfig.BOUNDS = {
+    "lambda_rgb": (0.0, 1e6, "a loss weight"), "rgb_every": (1, MAX_ITERATIONS, "iterations"),
+    "lambda_dssim": (0.0, 1.0, "D-SSIM's share of the RGB loss"), "rgb_samples": (1, 1000, "sharp renders per blurred frame"),
+}

@@ -165,7 +165,7 @@ def test_taskpool_reports_each_outcome_once_and_retries_failures(tmp_path, local
     assert sorted(o.key for o in seen) == ["t0", "t1", "t2", "t3"] and len(outcomes) == 4
     by = {o.key: o for o in seen}
     assert [by[f"t{x}"].value for x in (1, 2, 3)] == [1, 2, 3] and all(by[f"t{x}"].ok for x in (1, 2, 3))
-    assert not by["t0"].ok and by["t0"].error == "ArgumentTypeError: expected an integer >= 1, got '0'"
+    assert not by["t0"].ok and by["t0"].error == "ArgumentTypeError: expected an integer in 1 .. 1,000,000,000, got '0'"
     assert (tmp_path / "t0.log").read_text().count("attempt started") == 2      # one retry
     assert "Traceback" in (tmp_path / "t0.log").read_text()                     # kept in the job's log
     with pytest.raises(ValueError, match="unique"):
