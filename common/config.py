@@ -222,6 +222,34 @@ def _no_duplicates(loader: _StrictLoader, node: yaml.MappingNode, deep: bool = F
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _no_duplicates)
 
 
+MAX_YAML_VALUES = 1_000_000    # values of a config file once its aliases are expanded
+
+
+def expanded_size(data: Any, limit: int = MAX_YAML_VALUES) -> int:
+    """How many values `data` holds with every shared (aliased) list or mapping counted each time it is
+    referenced, computed once per object (so a 500-byte alias bomb is measured, not walked); counting
+    stops just past `limit`."""
+    memo: dict[int, int] = {}
+
+    def size(v: Any, depth: int) -> int:
+        if not isinstance(v, (list, tuple, dict)):
+            return 1
+        if id(v) in memo:
+            return memo[id(v)]
+        if depth > 200:                   # a self-referencing alias: infinite
+            return limit + 1
+        memo[id(v)] = limit + 1           # a cycle back to v while it is being measured
+        items = list(v.keys()) + list(v.values()) if isinstance(v, dict) else v
+        total = 1
+        for item in items:
+            total += size(item, depth + 1)
+            if total > limit:
+                break
+        memo[id(v)] = total
+        return total
+    return size(data, 0)
+
+
 def read_yaml_mapping(path: Path) -> dict:
     """The mapping at the top of a YAML file (empty file: {}); ConfigError naming the file otherwise,
     a key given twice in one mapping included."""
@@ -229,10 +257,16 @@ def read_yaml_mapping(path: Path) -> dict:
         text = path.read_text()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config file ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a text file (a YAML config is UTF-8 text)") from None
     try:
         data = yaml.load(text, Loader=_StrictLoader)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from None
+    n = expanded_size(data)
+    if n > MAX_YAML_VALUES:
+        raise ConfigError(f"{path}: its aliases (*name) expand to {n:,} values, more than any config holds "
+                          f"({MAX_YAML_VALUES:,}): an alias bomb, or aliases nested too deep")
     if data is None:
         return {}
     if not isinstance(data, Mapping):

@@ -58,3 +58,15 @@ def cache_dir() -> Path:
         return Path(os.environ["E4DGS_CACHE_DIR"])
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "e4dgs"
+
+
+def available_memory_bytes(path: str = "/proc/meminfo") -> int | None:
+    """Memory the kernel says a new process can take without swapping (MemAvailable), or None where
+    it does not say (not Linux)."""
+    try:
+        for line in Path(path).read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None

@@ -69,8 +69,9 @@ def load_preset(preset: str | Path) -> PresetConfig:
     if not path.exists():
         known = sorted(p.stem.removeprefix("dataset_") for p in PRESETS_DIR.glob("dataset_*.yaml"))
         raise ConfigError(f"unknown dataset preset {str(preset)!r} (no {path}); known presets: {', '.join(known)}")
+    data = read_yaml_mapping(path)        # its errors name the file already
     try:
-        preset_cfg = from_dict(PresetConfig, read_yaml_mapping(path))
+        preset_cfg = from_dict(PresetConfig, data)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
     for name in preset_cfg.scenes:   # every scene must build with the preset's overrides: blame the right file

@@ -83,6 +83,22 @@ class TrainResult:
         return (evals[-1]["test_psnr"], evals[-1].get("test_psnr_on", "rgb")) if evals else None
 
 
+def construct_method(method: str, dataset: SceneDataset, cfg):
+    """The method's object for a scene; a plug-in whose constructor fails is named (TrainingError)."""
+    from recon.trainer import BUNDLED_PACKAGES, TrainingError
+
+    cls = get_method(method)
+    try:
+        return cls(dataset, cfg)
+    except (TrainingError, KeyboardInterrupt):
+        raise
+    except Exception as exc:
+        if cls.__module__.split(".")[0] in BUNDLED_PACKAGES:
+            raise
+        raise TrainingError(f"method {method!r} (plug-in class {cls.__module__}.{cls.__qualname__}): its constructor "
+                            f"raised {type(exc).__name__}: {exc}") from exc
+
+
 def fit(scene_dir: str | Path | SceneDataset, method: str = "d3dgs", config: Any = None, out_dir: str | Path | None = None,
         overrides: Mapping[str, Any] | None = None, progress: bool = True,
         on_iteration: Callable | None = None, keep_initial: bool = False) -> TrainResult:
@@ -99,10 +115,15 @@ def fit(scene_dir: str | Path | SceneDataset, method: str = "d3dgs", config: Any
     inside = output_inside_input(out, {"the scene folder": dataset.dir})
     if inside:
         raise ValueError(f"out_dir: {inside}")
+    from common.machine import available_memory_bytes
+    from recon.memory import check_fits
+
+    if hasattr(cfg, "train"):
+        check_fits(cfg.train, dataset.scene.kind, available_memory_bytes())
     if out_dir is None and (out / "model.pt").exists():
         print(f"fit: {out} holds a finished {method} model of this scene: it is returned as it is "
               "(give out_dir for a new run)")
-    trainer = Trainer(get_method(method)(dataset, cfg), out, progress, on_iteration)
+    trainer = Trainer(construct_method(method, dataset, cfg), out, progress, on_iteration)
     initial = trainer.initial_model() if keep_initial else None
     model = trainer.run()
     # the trainer's own log (kept across resumes); a finished run returned as it is has only its file

@@ -95,6 +95,9 @@ def render_test_views(model, scene_dir: Path, out: Path, fmt: str = "png") -> in
     from recon.dataset_views import record_camera
 
     dataset = SceneDataset(scene_dir)
+    if model.meta.scene and model.meta.scene != dataset.scene.name:
+        raise ValueError(f"--test-views {scene_dir}: the model was trained on scene {model.meta.scene!r}, these are "
+                         f"the views of {dataset.scene.name!r}; its renders would be scored against another scene")
     records = dataset.frames("test")
     for rec in records:
         img = model.render_numpy(record_camera(dataset, rec), rec.time)

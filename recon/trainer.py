@@ -328,16 +328,23 @@ class Trainer:
         self.model.meta.active_sh_degree = g.active_sh_degree
         self.model.meta.deform_enabled = cfg.deform and it > sched.warm_up
         self.render_factor = cfg.coarse_to_fine.factor_at(it, cfg.iterations)
+        cls = type(self.method)
+        who = f"method {self.method.name!r} (plug-in class {cls.__module__}.{cls.__qualname__})"
         try:
-            loss, renders = self.method.step(self, it)
+            out = self.method.step(self, it)
         except (TrainingError, KeyboardInterrupt):
             raise
         except Exception as exc:      # a plug-in's own failure: name the plug-in (the bundled methods' stay as they are)
-            cls = type(self.method)
             if cls.__module__.split(".")[0] in BUNDLED_PACKAGES:
                 raise
-            raise TrainingError(f"method {self.method.name!r} (plug-in class {cls.__module__}.{cls.__qualname__}): its "
-                                f"step raised {type(exc).__name__}: {exc} at iteration {it}") from exc
+            raise TrainingError(f"{who}: its step raised {type(exc).__name__}: {exc} at iteration {it}") from exc
+        if not (isinstance(out, (tuple, list)) and len(out) == 2 and isinstance(out[0], torch.Tensor)
+                and out[0].numel() == 1 and out[0].requires_grad and isinstance(out[1], (list, tuple))):
+            got = (f"a {type(out).__name__}" if not isinstance(out, (tuple, list)) else
+                   f"({', '.join(type(v).__name__ + (f' of shape {tuple(v.shape)}' if isinstance(v, torch.Tensor) else '') for v in out)})")
+            raise TrainingError(f"{who}: its step returned {got} at iteration {it}; expected (loss, renders): a "
+                                "one-value loss tensor that has a gradient, and a list of (RenderOutput, Camera)")
+        loss, renders = out
         loss = loss + self._smoothness_term()
         loss_value = float(loss.detach())
         if not math.isfinite(loss_value):

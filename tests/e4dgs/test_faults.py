@@ -162,3 +162,70 @@ def test_a_renamed_variant_of_a_built_in_scene_builds_from_its_builder(tmp_path,
     assert main(["dataset", "--preset", "tiny", "--scene-config", str(mine), "--out", str(tmp_path / "data")]) == 0
     ds = SceneDataset(tmp_path / "data" / "my_cubes")
     assert ds.config.name == "my_cubes" and ds.config.source.builtin == "cubes" and ds.n_cameras > 0
+
+
+def test_sizes_beyond_their_meaning_or_the_machine_are_refused_before_a_file_is_written(motion_scene, tmp_path,
+                                                                                        capsys, monkeypatch):
+    """fourier=1000000 allocated 24 GB and was OOM-killed with no message, leaving config.yaml and run.json."""
+    import recon
+    from recon import memory
+
+    out = tmp_path / "run"
+    rc, err = run(["train", "--scene", motion_scene, "--out", out, "--set", "train.deform_field.fourier=1000000"], capsys)
+    assert rc == 1 and "fourier: expected 0 .. 64" in err and not out.exists(), err
+    rc, err = run(["train", "--scene", motion_scene, "--out", out, "--set", "train.iterations=1000000000000"], capsys)
+    assert rc == 1 and "iterations: expected 1 .. 1e+07" in err and not out.exists(), err
+    # within every range, but more than this machine has: the estimate names the field to lower
+    big = {"train.init.n_points_object": 10_000_000, "train.densify.max_gaussians": 20_000_000}
+    need, field = memory.training_bytes(recon.resolve_config("d3dgs", overrides=big).train, "object")
+    assert field == "train.densify.max_gaussians" and need == 20_000_000 * (16 * (11 + 48) + 512)
+    monkeypatch.setattr("common.machine.available_memory_bytes", lambda: need - 1)
+    with pytest.raises(ValueError, match=r"train.densify.max_gaussians: the run would hold up to 20,000,000 Gaussians"):
+        recon.fit(motion_scene, "d3dgs", overrides=big, out_dir=out, progress=False)
+    assert not out.exists()
+    traj = {"train.deform_field.kind": "trajectory", "train.deform_field.fourier": 64, "train.deform_field.degree": 16}
+    assert memory.training_bytes(recon.resolve_config("d3dgs", overrides=traj).train, "object")[1] == \
+        "train.deform_field.fourier / degree"
+
+
+def test_a_yaml_alias_bomb_and_a_binary_preset_are_refused_at_once(tmp_path, capsys):
+    """A ~350-byte YAML whose aliases expand to 9^9 values hung every command that read it."""
+    import time
+
+    parts = ['&a ["x","x","x","x","x","x","x","x","x"]'] + \
+        [f'&{k} [' + ",".join([f"*{p}"] * 9) + ']' for p, k in zip("abcdefgh", "bcdefghi")]
+    bomb = "[" + ", ".join(parts) + "]"
+    files = {"preset": ("scenes: [cubes]\noverrides:\n  description: " + bomb + "\n"),
+             "scene": "name: cubes\nkind: object\ndescription: " + bomb + "\n",
+             "bench": "description: " + bomb + "\n"}
+    for name, text in files.items():
+        (tmp_path / f"{name}.yaml").write_text(text)
+    assert all(len(t) < 600 for t in files.values())
+    for argv in (["dataset", "--preset", tmp_path / "preset.yaml", "--out", tmp_path / "d"],
+                 ["dataset", "--preset", "tiny", "--scene-config", tmp_path / "scene.yaml", "--out", tmp_path / "d"],
+                 ["bench", "--preset", tmp_path / "bench.yaml", "--out", tmp_path / "r"]):
+        t0 = time.perf_counter()
+        rc, err = run(argv, capsys)
+        assert rc == 1 and "aliases (*name) expand to" in err and time.perf_counter() - t0 < 10, err
+        assert err.count(".yaml: ") == 1, err                 # the file named once
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(bytes(range(256)) * 4)
+    rc, err = run(["dataset", "--preset", binary, "--out", tmp_path / "d"], capsys)
+    assert rc == 1 and f"{binary}: not a text file" in err
+    assert not (tmp_path / "d").exists() and not (tmp_path / "r").exists()
+
+
+def test_a_model_is_not_rendered_on_another_scenes_test_views(motion_scene, tmp_path, capsys):
+    import shutil
+
+    run_dir = tmp_path / "run"
+    assert main(["train", "--scene", str(motion_scene), "--out", str(run_dir), "--set", "train.iterations=2",
+                 "--set", "train.init.n_points_object=200"]) == 0
+    other = tmp_path / "other"
+    shutil.copytree(motion_scene, other)
+    text = (other / "scene.yaml").read_text()
+    (other / "scene.yaml").write_text(text.replace(f"name: {motion_scene.name}", "name: other", 1))
+    capsys.readouterr()
+    rc, err = run(["render", "--model", run_dir, "--test-views", other, "--out", tmp_path / "renders"], capsys)
+    assert rc == 1 and f"trained on scene '{motion_scene.name}', these are the views of 'other'" in err, err
+    assert not (tmp_path / "renders").exists()

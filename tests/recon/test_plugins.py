@@ -204,3 +204,32 @@ def test_a_failing_plugin_costs_only_its_own_cells_in_a_bench(motion_scene, tmp_
                               scenes=None, methods=None, report=True, studies=["main"], no_progress=True)
     assert run_bench_cli(args) == 1
     assert f"main/{motion_scene.name}/broken" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind,words", [
+    ("constructor", r"its constructor raised RuntimeError: no weights"),
+    ("junk", r"its step returned a str at iteration 1; expected \(loss, renders\)"),
+    ("vector", r"its step returned \(Tensor of shape \(3,\), list\) at iteration 1"),
+])
+def test_a_plugin_that_fails_to_build_or_returns_junk_is_named(kind, words, motion_scene, tmp_path, monkeypatch):
+    import torch
+
+    import recon
+    from recon.methods.d3dgs import D3DGS
+    from recon.trainer import TrainingError
+
+    class Odd(D3DGS):
+        name = "odd_d3dgs"
+
+        def __init__(self, dataset, cfg):
+            if kind == "constructor":
+                raise RuntimeError("no weights")
+            super().__init__(dataset, cfg)
+
+        def step(self, trainer, it):
+            return "a loss" if kind == "junk" else (torch.ones(3, requires_grad=True), [])
+
+    monkeypatch.setitem(registry.METHODS, "odd_d3dgs", Odd)
+    with pytest.raises(TrainingError, match=r"method 'odd_d3dgs' \(plug-in class .*Odd\): " + words):
+        recon.fit(motion_scene, "odd_d3dgs", overrides=TINY, out_dir=tmp_path / "run", progress=False)
+    assert not (tmp_path / "run" / "model.pt").exists()
