@@ -33,30 +33,30 @@ def nonnegative_int(text: str) -> int:
     return value
 
 
-def int_in(lo: int, hi: int, what: str = "") -> "callable":
-    """An argparse type: an integer in lo .. hi (`what` says what it counts, for the message)."""
-    def parse(text: str) -> int:
-        value = _number(int, text)
+def _ranged(kind, lo, hi, what: str):
+    """An argparse type: a finite `kind` (int or float) in lo .. hi; `what` says what it counts."""
+    word = "an integer" if kind is int else "a number"
+    shown = (lambda v: f"{v:,}") if kind is int else (lambda v: f"{v:g}")
+
+    def parse(text: str):
+        value = _number(kind, text)
         if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer in {lo:,} .. {hi:,}{f' ({what})' if what else ''}, "
-                                             f"got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected {word} in {shown(lo)} .. {shown(hi)}"
+                                             f"{f' ({what})' if what else ''}, got {text!r}")
         return value
-    parse.__name__ = f"int_in_{lo}_{hi}"
+    parse.__name__ = f"{kind.__name__}_in_{lo:g}_{hi:g}"
     parse.bounds = (lo, hi)
     return parse
 
 
-def float_in(lo: float, hi: float, what: str = "") -> "callable":
+def int_in(lo: int, hi: int, what: str = ""):
+    """An argparse type: an integer in lo .. hi."""
+    return _ranged(int, lo, hi, what)
+
+
+def float_in(lo: float, hi: float, what: str = ""):
     """An argparse type: a finite number in [lo, hi]."""
-    def parse(text: str) -> float:
-        value = _number(float, text)
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"expected a number in {lo:g} .. {hi:g}{f' ({what})' if what else ''}, "
-                                             f"got {text!r}")
-        return value
-    parse.__name__ = f"float_in_{lo:g}_{hi:g}"
-    parse.bounds = (lo, hi)
-    return parse
+    return _ranged(float, lo, hi, what)
 
 
 port_int = int_in(0, 65535, "a TCP port; 0 picks a free one")

@@ -96,6 +96,15 @@ def output_lock(path: str | os.PathLike) -> Iterator[Path]:
                 d.rmdir()
 
 
+def disk_nearly_full(folder: Path, min_free: int = 1 << 20) -> bool:
+    """Whether the file system of `folder` has less than `min_free` bytes left."""
+    try:
+        st = os.statvfs(folder)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < min_free
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path to write (a file, or a folder the block creates); on success rename it to
@@ -114,6 +123,12 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     except OSError as exc:
         if exc.filename is None and exc.strerror:      # a write's error (a full disk) names no file: name ours
             raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        raise
+    except Exception as exc:
+        # a library's own words for a failed write ("[enforce fail at inline_container.cc] unexpected pos"
+        # from torch.save on a full disk): said plainly when the disk is in fact full
+        if disk_nearly_full(path.parent):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path)) from exc
         raise
     finally:
         if tmp.exists() or tmp.is_symlink():

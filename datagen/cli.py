@@ -58,8 +58,11 @@ def own_scene_args(files: list[Path], configs: list[Path], kind: str) -> dict[st
             parsed = resolve_scene(name, scene_file=cfg)
             if not parsed.source.file:
                 builtin_builder(parsed, cfg)
-            elif not Path(parsed.source.file).is_file():
-                raise SystemExit(f"error: {cfg}: source.file: {parsed.source.file}: no such file")
+            else:                         # relative to the YAML's folder, as the worker reads it
+                src = Path(parsed.source.file)
+                src = src if src.is_absolute() else Path(cfg).parent / src
+                if not src.is_file():
+                    raise SystemExit(f"error: {cfg}: source.file: {src}: no such file")
         except ConfigError as exc:
             raise SystemExit(f"error: {exc}") from None
         add(name, ["--scene", name, "--scene-config", str(cfg)], cfg)

@@ -516,7 +516,10 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except (ValueError, OSError) as exc:
-        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+        if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+            print(f"error: {exc.filename}: {exc.strerror}", file=sys.stderr)      # a full disk: the file it met
+        else:
+            print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
     return 0
 

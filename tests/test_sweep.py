@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
-import subprocess
 import sys
 import typing
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 import pytest
 
 from e4dgs.cli import build_parser, main
+from tests.conftest import mount_tmpfs, unmount
 
 ROOT = Path(__file__).resolve().parents[1]
 TOOLS = sorted(p.stem for p in (ROOT / "tools").glob("*.py") if p.stem not in ("__init__", "tool_cli"))
@@ -246,14 +246,13 @@ SUFFIX = {"import": ".h5", "export": ".npz", "view": ".png"}
 def read_only_folder(tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(folder)], capture_output=True)
-    if r.returncode != 0:
+    if mount_tmpfs(folder, "ro,size=1m"):
+        yield folder
+        unmount(folder)
+    else:
         folder.chmod(0o555)                      # not root: the permission bits are enough
         yield folder
         folder.chmod(0o755)
-        return
-    yield folder
-    subprocess.run(["umount", str(folder)], check=True)
 
 
 @pytest.mark.parametrize("command", sorted(FILE_OUTPUTS))

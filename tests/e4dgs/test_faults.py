@@ -1,6 +1,5 @@
 """Faults users meet: an output that would land on an input, a full disk under every writer (a real
 tmpfs where the machine lets us mount one), and refusals that come before any work."""
-import subprocess
 from pathlib import Path
 
 import cv2
@@ -11,6 +10,7 @@ from e4dgs.cli import main
 from simulator import formats
 from simulator.events import EventStream, make_events
 from simulator.h5io import write_events
+from tests.conftest import mount_tmpfs, unmount
 
 
 def stream(n: int, start_us: int = 0, seed: int = 0) -> EventStream:
@@ -78,11 +78,10 @@ def small_disk(tmp_path):
     """A 1 MiB tmpfs (root can mount one; elsewhere the tests skip)."""
     disk = tmp_path / "disk"
     disk.mkdir()
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)], capture_output=True)
-    if r.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {r.stderr.decode(errors='replace').strip()}")
+    if not mount_tmpfs(disk, "size=1m"):
+        pytest.skip("cannot mount a tmpfs here")
     yield disk
-    subprocess.run(["umount", str(disk)], check=True)
+    unmount(disk)
 
 
 @pytest.mark.parametrize("fmt", formats.FORMATS)
@@ -229,3 +228,12 @@ def test_a_model_is_not_rendered_on_another_scenes_test_views(motion_scene, tmp_
     rc, err = run(["render", "--model", run_dir, "--test-views", other, "--out", tmp_path / "renders"], capsys)
     assert rc == 1 and f"trained on scene '{motion_scene.name}', these are the views of 'other'" in err, err
     assert not (tmp_path / "renders").exists()
+
+
+def test_a_full_disk_under_train_names_the_file_torch_could_not_write(motion_scene, small_disk, capsys):
+    """torch.save on a full disk said '[enforce fail at inline_container.cc:672] . unexpected pos ...'."""
+    rc, err = run(["train", "--scene", motion_scene, "--out", small_disk / "run", "--set", "train.iterations=3",
+                   "--set", "train.init.n_points_object=20000"], capsys)
+    lines = [ln for ln in err.replace("\r", "\n").splitlines() if "error" in ln]
+    assert rc == 1 and len(lines) == 1 and f"{small_disk / 'run'}" in lines[0] and "No space left on device" in lines[0], err
+    assert "enforce fail" not in err and list(small_disk.iterdir()) == []
