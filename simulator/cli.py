@@ -65,6 +65,10 @@ def read_timestamps(path: Path, n_frames: int) -> list[int]:
             raise SystemExit(f"error: {path}:{lineno}: expected an integer microsecond timestamp, got {line!r}") from None
     if len(values) != n_frames:
         raise SystemExit(f"error: {path}: {len(values)} timestamps for {n_frames} frames")
+    for k in range(1, len(values)):
+        if values[k] <= values[k - 1]:
+            raise SystemExit(f"error: {path}: timestamp {k + 1} ({values[k]} us) is not after timestamp {k} "
+                             f"({values[k - 1]} us); the frames' times must increase")
     return values
 
 
@@ -196,6 +200,8 @@ def run_view(args: argparse.Namespace) -> int:
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)
+        if ev.n == 0:
+            raise SystemExit(f"error: {args.events}: no events (an empty stream): nothing to draw")
         # the stream's own span (a recording may start anywhere, e.g. at Unix-epoch microseconds), also
         # when the file records no end (its attribute would fall back to the offset)
         first = int(ev.times(0, 1)[0]) if ev.n else ev.t_offset_us

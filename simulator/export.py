@@ -133,8 +133,8 @@ def read_npz(path: str | os.PathLike) -> EventStream:
     for name in ("width", "height"):
         v = {"width": width, "height": height}[name]
         if v.shape != () or v.dtype.kind not in "iu" or int(v) <= 0:
-            raise ValueError(f"{path}: {name}: expected a positive integer scalar, found {v.dtype.name} "
-                             f"of shape {v.shape}")
+            found = f"{v.item()!r}" if v.shape == () else f"{v.dtype.name} of shape {v.shape}"
+            raise ValueError(f"{path}: {name}: expected the sensor's {name} as a positive integer, found {found}")
     n = len(cols["t"])
     for name, col in cols.items():
         if col.ndim != 1 or len(col) != n:

@@ -72,7 +72,7 @@ def rows(args) -> list[tuple[str, str, float, float]]:
             p.grad = torch.randn_like(p)
         adam.append(timed(opt.step, args.reps))
     out.append(("Adam step", f"{sum(np.prod(s) for s in shapes) * args.gaussians:,} values", *adam))
-    scene = Path(args.scene)
+    scene = Path(args.scene or DEFAULT_SCENE)
     if not (scene / "manifest.json").exists():
         print(f"bench_step_rest: {scene}: no dataset here, the event-window row is left out "
               f"(make dataset SCENES={scene.name.split('_x')[0]})", file=sys.stderr)
@@ -93,15 +93,18 @@ def rows(args) -> list[tuple[str, str, float, float]]:
     return out
 
 
+DEFAULT_SCENE = "data/quick/hinge_x26.2"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default="data/quick/hinge_x26.2", help="a scene folder for the event-window row")
+    ap.add_argument("--scene", default=None,
+                    help="a scene folder for the event-window row (default data/quick/hinge_x26.2, left out if missing)")
     ap.add_argument("--gaussians", type=positive_int, default=11574, help="model size (bench_train's late state)")
     ap.add_argument("--reps", type=positive_int, default=15)
     args = ap.parse_args(argv)
-    if args.gaussians < 1 or args.reps < 1:
-        print("bench_step_rest: --gaussians and --reps must be >= 1", file=sys.stderr)
-        return 2
+    if args.scene is not None and not (Path(args.scene) / "manifest.json").exists():   # before any timing
+        ap.error(f"--scene {args.scene}: no generated scene here (no manifest.json)")
     import numba
     import torch
 

@@ -66,8 +66,12 @@ def main(argv=None) -> int:
     try:
         rows = [json.loads(line) for line in args.results.read_text().splitlines() if line.strip()]
         ref, costs = costs_from_rows(rows, args.scene)
+    except UnicodeDecodeError:
+        print(f"error: {args.results}: not a text file (expected results.jsonl, one JSON row a line)", file=sys.stderr)
+        return 1
     except (OSError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        message = str(exc)
+        print(f"error: {message if str(args.results) in message else f'{args.results}: {message}'}", file=sys.stderr)
         return 1
     print(f"D3DGS on {args.scene}: {ref:.2f} dB on sharp frames\n\n| speed | blur median / p90 px | blurred vs sharp dB "
           f"| D3DGS blurred PSNR | cost dB |\n|---|---|---|---|---|")

@@ -106,7 +106,7 @@ def test_a_carving_that_keeps_nothing_falls_back_to_the_auto_volume_and_says_so(
     from recon.initial_points import InitFallbackWarning, initial_points
 
     ds = SceneDataset(motion_scene)
-    nothing = dict(kind="events", n_points_object=500, carve_candidates=5000, carve_min_events=10 ** 9)  # no pixel active
+    nothing = dict(kind="events", n_points_object=500, carve_candidates=5000, carve_min_events=1000)  # no pixel active (the range's top)
     cube = initial_points(ds, replace(TrainConfig(), init=InitConfig(kind="auto", n_points_object=500)))
     with pytest.warns(InitFallbackWarning, match=r"init.kind events -> cube: .*kept no initial point .*\) \(init.carve_fallback: auto\)$"):
         got = initial_points(ds, replace(TrainConfig(), init=InitConfig(**nothing)))

@@ -21,5 +21,11 @@ def test_step_rest_table_has_every_part_with_both_timings(motion_scene, capsys):
 def test_step_rest_refuses_empty_sizes(capsys):
     from tools.bench_step_rest import main
 
-    assert main(["--gaussians", "0"]) == 2
-    assert "--gaussians" in capsys.readouterr().err
+    import pytest
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--gaussians", "0"])
+    assert exc.value.code == 2 and "argument --gaussians: expected an integer in 1 .." in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:             # a scene named that is not there: before any timing
+        main(["--scene", "/nowhere/scene"])
+    assert exc.value.code == 2 and "--scene /nowhere/scene: no generated scene here" in capsys.readouterr().err

@@ -24,7 +24,7 @@ import pytest
 from e4dgs.cli import build_parser, main
 from tests.conftest import mount_tmpfs, unmount
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TOOLS = sorted(p.stem for p in (ROOT / "tools").glob("*.py") if p.stem not in ("__init__", "tool_cli"))
 
 
