@@ -52,6 +52,12 @@ class D3DGS(Method):
         self.views = self.training_views()
         if not self.views:
             raise DatasetError(f"{dataset.dir}: no training frames for frames={cfg.frames!r}")
+        channels = type(self).channels_of(cfg)
+        for k, v in enumerate(self.views):        # a frame of another size would fail deep in the loss, or broadcast
+            want = (v.camera.height, v.camera.width, channels)
+            if tuple(v.image.shape) != want:
+                raise DatasetError(f"{dataset.dir}: training view {k} (t = {v.time:.4f}) is {tuple(v.image.shape)} "
+                                   f"(height, width, channels); its camera sees {want}")
 
     @classmethod
     def channels_of(cls, cfg: D3DGSConfig) -> int:

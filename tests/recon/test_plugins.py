@@ -233,3 +233,24 @@ def test_a_plugin_that_fails_to_build_or_returns_junk_is_named(kind, words, moti
     with pytest.raises(TrainingError, match=r"method 'odd_d3dgs' \(plug-in class .*Odd\): " + words):
         recon.fit(motion_scene, "odd_d3dgs", overrides=TINY, out_dir=tmp_path / "run", progress=False)
     assert not (tmp_path / "run" / "model.pt").exists()
+
+
+def test_training_frames_of_the_wrong_size_are_refused_naming_the_view(motion_scene, monkeypatch):
+    """Gray frames of another size than the camera's (a plug-in's, or an E2VID network's) were taken."""
+    import torch
+
+    from recon.methods.d3dgs import D3DGS, TrainView
+    from scene_format.reader import DatasetError, SceneDataset
+
+    class SmallFrames(D3DGS):
+        name = "small_frames"
+
+        def training_views(self):
+            views = super().training_views()
+            return views[:1] + [TrainView(v.camera, v.time, torch.zeros(8, 8, v.image.shape[2])) for v in views[1:2]]
+
+    ds = SceneDataset(motion_scene)
+    cfg = registry.get_method("d3dgs").config_cls()
+    with pytest.raises(DatasetError, match=r"training view 1 \(t = .*\) is \(8, 8, 3\) \(height, width, channels\); "
+                                           r"its camera sees \(\d+, \d+, 3\)"):
+        SmallFrames(ds, cfg)
