@@ -43,7 +43,7 @@ def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root
     status "failed" and the error)."""
     data_root, out_root = Path(data_root).resolve(), Path(out_root).resolve()   # workers may run elsewhere
     groups = by_folder(todo)
-    with ray_session(opts):
+    with ray_session(opts, out_root / "logs" / "ray.log"):
         gpus = cluster_gpus()
         specs = []
         for run_dir, group in groups.items():

@@ -19,6 +19,7 @@ import contextlib
 import os
 import socket
 import sys
+import tempfile
 import time
 import traceback
 from dataclasses import dataclass
@@ -161,8 +162,10 @@ def _one_line(exc: BaseException) -> str:
 
 
 @contextlib.contextmanager
-def ray_session(opts: RayOptions):
-    """Connect to the cluster at opts.address, or start a local Ray (shut down again on exit)."""
+def ray_session(opts: RayOptions, log_path: str | os.PathLike | None = None):
+    """Connect to the cluster at opts.address, or start a local Ray (shut down again on exit). Ray's
+    own messages to the driver (a page of text for each memory kill) go to `log_path` (default: a file
+    in the temporary folder), one line each to the console."""
     ray = _import_ray()
     if ray.is_initialized():
         yield ray
@@ -172,10 +175,34 @@ def ray_session(opts: RayOptions):
         ray.init(num_cpus=opts.local_cpus or os.cpu_count(), **kwargs)
     else:
         ray.init(address=opts.address, **kwargs)
+    restore = _ray_messages_to(Path(log_path) if log_path else Path(tempfile.gettempdir()) / f"e4dgs-ray-{os.getpid()}.log")
     try:
         yield ray
     finally:
+        restore()
         ray.shutdown()
+
+
+def _ray_messages_to(log: Path) -> Callable[[], None]:
+    """Send what Ray's driver thread prints of the cluster's errors (ray._private.worker.print_to_stdstream,
+    looked up by name on each message) to `log`, with one line on stderr per message; returns the undo."""
+    import ray._private.worker as ray_worker
+
+    original = ray_worker.print_to_stdstream
+
+    def to_log(data, ignore_prefix=False):
+        text = "\n".join(str(line) for line in (data.get("lines") or []))
+        try:
+            log.parent.mkdir(parents=True, exist_ok=True)
+            with open(log, "a") as fh:
+                fh.write(f"--- {time.strftime('%Y-%m-%d %H:%M:%S')} from {data.get('pid', '?')}\n{text}\n")
+        except OSError:
+            pass
+        first = next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
+        print(f"ray: {first[:200]} (Ray's full message: {log})", file=sys.stderr, flush=True)
+
+    ray_worker.print_to_stdstream = to_log
+    return lambda: setattr(ray_worker, "print_to_stdstream", original)
 
 
 def cluster_gpus() -> float:

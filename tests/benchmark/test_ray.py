@@ -313,3 +313,22 @@ def test_losing_the_progress_actor_costs_the_display_never_the_grid(tmp_path, lo
     assert sorted(o.key for o in outcomes) == ["later", "nap", "quick"] and all(o.ok for o in outcomes)
     assert {o.key: o.value for o in outcomes} == {"quick": 1, "nap": None, "later": 3}
     assert "running ?" in capsys.readouterr().err          # the display says it lost count, and goes on
+
+
+def test_rays_messages_go_to_the_log_with_one_line_on_the_console(tmp_path, capsys):
+    """A memory kill printed a page of Ray's text (object store stats, top memory users, advice) into
+    the console of `make benchmark`; it goes to the log now, one line on the console."""
+    import ray._private.worker as ray_worker
+
+    from common.taskpool import _ray_messages_to
+
+    original = ray_worker.print_to_stdstream
+    log = tmp_path / "logs" / "ray.log"
+    undo = _ray_messages_to(log)
+    page = "\nOOM kill reason: Memory usage 24151179264B exceeded threshold\nObject store memory usage: [...]\n" + "x\n" * 40
+    ray_worker.print_to_stdstream({"lines": [page], "pid": "raylet", "is_err": False}, ignore_prefix=False)
+    undo()
+    err = capsys.readouterr()
+    assert err.out == "" and err.err.count("\n") == 1
+    assert err.err.startswith("ray: OOM kill reason: Memory usage 24151179264B exceeded threshold") and str(log) in err.err
+    assert "Object store memory usage" in log.read_text() and ray_worker.print_to_stdstream is original
