@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
+import re
 import sys
 import typing
 from pathlib import Path
@@ -206,6 +207,9 @@ EVENT_COMMANDS = {
 }
 
 
+PROGRESS = re.compile(r"^[\w /.-]+:\s+\d+%\|")      # a tqdm bar's redraw (split at its carriage returns)
+
+
 def run_cli(argv, capsys) -> tuple[int, list[str]]:
     try:
         rc = main([str(a) for a in argv])
@@ -214,7 +218,7 @@ def run_cli(argv, capsys) -> tuple[int, list[str]]:
         if isinstance(exc.code, str):
             print(exc.code, file=sys.stderr)
     captured = capsys.readouterr()
-    lines = [ln for ln in captured.err.splitlines() if ln.strip() and "\r" not in ln and not ln.startswith("warning:")]
+    lines = [ln for ln in captured.err.splitlines() if ln.strip() and not PROGRESS.match(ln) and not ln.startswith("warning:")]
     if not lines and rc:                   # `check` reports what it found on stdout (its result, exit 1)
         lines = [ln for ln in captured.out.splitlines() if ln.strip()]
     return rc, lines
@@ -271,3 +275,51 @@ def test_every_file_output_that_cannot_be_written_is_refused_in_one_line(command
     assert rc != 0 and len(err) == 1 and "Traceback" not in err[0] and "internal error" not in err[0], err
     assert str(out) in err[0] or out.name in err[0], err
     assert src.read_bytes() == before and sorted(p.name for p in tmp_path.rglob("*")) == listing
+
+
+# -- config files and frames: empty, truncated, binary, of the wrong kind -----------------------------
+CONFIG_COMMANDS = {
+    "simulate --config": lambda f, d: ["simulate", "--frames", d / "frames", "--fps", "1000", "--out", d / "o.h5", "--config", f],
+    "train --config": lambda f, d: ["train", "--scene", d / "noscene", "--config", f, "--out", d / "run"],
+    "dataset --preset": lambda f, d: ["dataset", "--preset", f, "--out", d / "data"],
+    "dataset --scene-config": lambda f, d: ["dataset", "--preset", "tiny", "--scene-config", f, "--out", d / "data"],
+    "bench --preset": lambda f, d: ["bench", "--preset", f, "--out", d / "runs"],
+    "train-e2vid --config": lambda f, d: ["train-e2vid", "--config", f, "--out", d / "e2vid"],
+}
+BROKEN_YAML = {"empty-list": "[]\n", "truncated": "train: {iterations: [1, 2\n", "binary": bytes(range(256)) * 2,
+               "scalar": "just words\n", "tabs": "a:\n\tb: 1\n"}
+
+
+@pytest.mark.parametrize("command", sorted(CONFIG_COMMANDS))
+@pytest.mark.parametrize("kind", sorted(BROKEN_YAML))
+def test_every_config_input_refuses_a_broken_file_in_one_line(command, kind, tmp_path, capsys):
+    import cv2
+
+    (tmp_path / "frames").mkdir()
+    for k in range(2):
+        cv2.imwrite(str(tmp_path / "frames" / f"{k}.png"), np.full((8, 8, 3), 40 * k, np.uint8))
+    f = tmp_path / f"{kind}.yaml"
+    content = BROKEN_YAML[kind]
+    f.write_bytes(content if isinstance(content, bytes) else content.encode())
+    listing = sorted(p.name for p in tmp_path.rglob("*"))
+    rc, err = run_cli(CONFIG_COMMANDS[command](f, tmp_path), capsys)
+    assert rc in (1, 2) and len(err) == 1 and "Traceback" not in err[0] and "internal error" not in err[0], err
+    assert f.name in err[0] or "noscene" in err[0], err
+    assert sorted(p.name for p in tmp_path.rglob("*")) == listing
+
+
+@pytest.mark.parametrize("kind", ["empty", "truncated", "text", "one-pixel"])
+def test_simulate_refuses_a_broken_frame_naming_it(kind, tmp_path, capsys):
+    import cv2
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k in range(3):
+        cv2.imwrite(str(frames / f"{k:03d}.png"), np.full((12, 16, 3), 60 + 40 * k, np.uint8))
+    bad = frames / "001.png"
+    data = bad.read_bytes()
+    bad.write_bytes({"empty": b"", "truncated": data[: len(data) // 2], "text": b"not an image\n",
+                     "one-pixel": cv2.imencode(".png", np.zeros((1, 1, 3), np.uint8))[1].tobytes()}[kind])
+    rc, err = run_cli(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "ev.h5"], capsys)
+    assert rc == 1 and len(err) == 1 and "001.png" in err[0] and "internal error" not in err[0], err
+    assert not (tmp_path / "ev.h5").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["frames"]
