@@ -126,6 +126,7 @@ def run_masks(args: argparse.Namespace) -> int:
     import subprocess
 
     from common.taskpool import child_env, die_with_parent
+    from scene_format.config import read_scene_config
     from scene_format.verify import scene_dirs
 
     scenes = scene_dirs(args.path)
@@ -138,6 +139,10 @@ def run_masks(args: argparse.Namespace) -> int:
         if (d / "dynamic" / "masks.json").exists() and not args.force:
             print(f"{d}: has masks, skipped")
             continue
+        cfg = read_scene_config(d / "scene.yaml")
+        if cfg.source.file and not Path(cfg.source.file).is_file():     # the masks re-trace the scene's geometry
+            raise SystemExit(f"error: {d}: its source file {cfg.source.file} is gone, and the dynamic masks are traced "
+                             "from the scene's geometry; restore the file there, or generate the scene again")
         r = subprocess.run([sys.executable, "-m", "datagen.add_masks", str(d)], env=child_env(),
                            preexec_fn=die_with_parent)
         if r.returncode != 0:

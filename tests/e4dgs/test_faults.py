@@ -237,3 +237,16 @@ def test_a_full_disk_under_train_names_the_file_torch_could_not_write(motion_sce
     lines = [ln for ln in err.replace("\r", "\n").splitlines() if "error" in ln]
     assert rc == 1 and len(lines) == 1 and f"{small_disk / 'run'}" in lines[0] and "No space left on device" in lines[0], err
     assert "enforce fail" not in err and list(small_disk.iterdir()) == []
+
+
+def test_masks_on_a_scene_whose_source_file_is_gone_says_so(motion_scene, tmp_path, capsys):
+    import shutil
+
+    scene = tmp_path / "scene"
+    shutil.copytree(motion_scene, scene)
+    (scene / "scene.yaml").write_text((scene / "scene.yaml").read_text() + "source:\n  file: /nowhere/walker.blend\n"
+                                      if "source:" not in (scene / "scene.yaml").read_text() else
+                                      (scene / "scene.yaml").read_text().replace("file: ''", "file: /nowhere/walker.blend"))
+    shutil.rmtree(scene / "dynamic", ignore_errors=True)
+    rc, err = run(["masks", scene], capsys)
+    assert rc == 1 and "its source file /nowhere/walker.blend is gone" in err, err
