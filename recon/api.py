@@ -17,6 +17,7 @@ from scene_format.reader import SceneDataset
 from common.config import ConfigError, build_config, parse_set, set_dotted  # noqa: F401  (parse_set, set_dotted re-exported)
 from common.fileio import output_inside_input
 from recon.methods import get_method
+from recon.scoring import checked_pairs
 from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)
 from recon.trainer import Trainer
 
@@ -155,5 +156,6 @@ def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, spli
     masks = [dataset.dynamic_mask(r) for r in records] if dynamic else []
     if device is not None:
         model = model.to(device)
-    pairs = method.scorer(dataset, cfg).eval_pairs(model, records, backend)
+    pairs = checked_pairs(method, method.scorer(dataset, cfg).eval_pairs(model, records, backend), records,
+                          f"the {split} views of {dataset.dir}")
     return score_pairs(pairs, lpips_net=lpips_net, masks=masks if any(m is not None for m in masks) else None)

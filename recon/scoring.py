@@ -16,6 +16,19 @@ from recon.model import DynamicGaussians
 from recon.dataset_views import load_frame, record_camera
 
 
+def checked_pairs(method_cls: type, pairs, records, what: str) -> list:
+    """The (prediction, ground truth) pairs of `records` as a list, or ValueError naming the method's
+    class when they are not one same-shaped pair per record (a plug-in that renders no views)."""
+    pairs = list(pairs)
+    who = f"method {getattr(method_cls, 'name', '?')!r} ({method_cls.__module__}.{method_cls.__qualname__})"
+    if len(pairs) != len(records):
+        raise ValueError(f"{who}: its scorer gave {len(pairs)} (prediction, ground truth) pairs for {len(records)} {what}")
+    for rec, (pred, gt) in zip(records, pairs):
+        if np.shape(pred) != np.shape(gt):
+            raise ValueError(f"{who}: its render of view {rec.stem} is {np.shape(pred)}, the view is {np.shape(gt)}")
+    return pairs
+
+
 class Scorer:
     def __init__(self, dataset: SceneDataset, channels: int,
                  correct: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None):

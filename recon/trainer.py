@@ -36,7 +36,7 @@ from recon.config import TrainConfig
 from recon.deform import make_field
 from recon.densify import DensifyStats, densify_and_prune, reset_opacity
 from recon.device import run_placement
-from recon.scoring import evaluate_psnr
+from recon.scoring import checked_pairs, evaluate_psnr
 from recon.gaussians import GaussianModel, position_lr
 from recon.model import DynamicGaussians, ModelMeta, load
 from recon.raster import warm_up
@@ -273,7 +273,8 @@ class Trainer:
         if self.tcfg.eval_max_views and len(records) > self.tcfg.eval_max_views:
             pick = np.linspace(0, len(records) - 1, self.tcfg.eval_max_views).round().astype(int)
             records = [records[i] for i in pick]
-        return evaluate_psnr(self.method.eval_pairs(self.model, records, self.backend))
+        return evaluate_psnr(checked_pairs(type(self.method), self.method.eval_pairs(self.model, records, self.backend),
+                                           records, f"the test views of {self.dataset.dir}"))
 
     def psnr_target(self) -> str:
         """What test_psnr compares, as the log and the progress bar say: colour frames, or (a method that

@@ -254,3 +254,31 @@ def test_training_frames_of_the_wrong_size_are_refused_naming_the_view(motion_sc
     with pytest.raises(DatasetError, match=r"training view 1 \(t = .*\) is \(8, 8, 3\) \(height, width, channels\); "
                                            r"its camera sees \(\d+, \d+, 3\)"):
         SmallFrames(ds, cfg)
+
+
+def test_a_plugin_that_renders_no_views_is_named_in_a_bench(motion_scene, tmp_path, monkeypatch):
+    """A plug-in whose scorer yields no (prediction, ground truth) pairs failed inside score_pairs
+    ('no image pairs'), naming nothing; in a bench its cell is now a failed row naming the plug-in."""
+    from benchmark.config import BenchConfig, CellSpec
+    from benchmark.runner import run_bench
+    from common.config import build_config
+    from recon.methods.d3dgs import D3DGS
+
+    class NoViews(D3DGS):
+        name = "no_views"
+
+        @classmethod
+        def scorer(cls, dataset, cfg):
+            class Empty:
+                def eval_pairs(self, model, records, backend="auto"):
+                    return []
+            return Empty()
+
+    monkeypatch.setitem(registry.METHODS, "no_views", NoViews)
+    over = {**TINY, "frames": "sharp"}
+    cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name],
+                                     "cells": {"none": CellSpec("no_views", overrides=over)}})
+    rows = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "runs", studies=("main",), progress=False,
+                     log=lambda s: None)
+    assert rows[0]["status"] == "failed"
+    assert "method 'no_views' (" in rows[0]["error"] and "its scorer gave 0 (prediction, ground truth) pairs" in rows[0]["error"]
