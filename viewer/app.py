@@ -12,6 +12,7 @@ gives). `sent[client_id]` keeps the last image sent to each tab, with what it sh
 """
 from __future__ import annotations
 
+import logging
 import threading
 import time
 import warnings
@@ -31,6 +32,21 @@ FRAME_US = 1e6 / 3000.0        # one rendered frame of the datasets (3000 FPS): 
 TICK_S = 0.02                  # the render thread's polling period
 SNAP_ECHO_S = 0.5              # camera reports this soon after we moved the browser's camera are its echo
 CAMERA_COLORS = [(230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48), (145, 30, 180)]
+
+
+class _AbortedHandshakes(logging.Filter):
+    """websockets logs "opening handshake failed" with a traceback when a browser opens a speculative
+    connection and closes it before sending its request: nothing the viewer or its user can act on."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.getMessage() != "opening handshake failed"
+
+
+def quiet_aborted_handshakes() -> None:
+    """Keep websockets' aborted-handshake tracebacks out of the console (installed once per process)."""
+    log = logging.getLogger("websockets.server")
+    if not any(isinstance(f, _AbortedHandshakes) for f in log.filters):
+        log.addFilter(_AbortedHandshakes())
 
 
 @dataclass
@@ -112,6 +128,7 @@ class Viewer:
         self._stop = threading.Event()
         # a tab that closes while its images are being sent: viser warns, nothing is lost
         warnings.filterwarnings("ignore", message="Queued a .* on a closed connection")
+        quiet_aborted_handshakes()
         self.server = viser.ViserServer(host=host, port=port, verbose=verbose)
         self.server.gui.configure_theme(control_width="large")
         self._add_trajectories()

@@ -214,3 +214,23 @@ def test_the_command_serves_then_stops_on_ctrl_c_leaving_no_process_and_no_file(
     assert alive == []
     assert list(work.iterdir()) == [] and list((tmp_path / "tmp").iterdir()) == []
     assert {p for p in motion_scene.rglob("*")} == before
+
+
+def test_a_browsers_aborted_handshake_prints_nothing_but_other_errors_still_do(caplog):
+    """A fresh-clone CI failed on websockets' 'opening handshake failed' traceback in the viewer's stderr
+    (Chromium's speculative connection, closed before its request); a user saw it too."""
+    import logging
+
+    from viewer.app import quiet_aborted_handshakes
+
+    quiet_aborted_handshakes()
+    quiet_aborted_handshakes()                        # once per process, however often a viewer starts
+    log = logging.getLogger("websockets.server")
+    assert sum(type(f).__name__ == "_AbortedHandshakes" for f in log.filters) == 1
+    with caplog.at_level(logging.ERROR, logger="websockets.server"):
+        try:
+            raise EOFError("connection closed while reading HTTP request line")
+        except EOFError:
+            logging.LoggerAdapter(log, {}).error("opening handshake failed", exc_info=True)
+        log.error("something else went wrong")
+    assert [r.getMessage() for r in caplog.records] == ["something else went wrong"]
