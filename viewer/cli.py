@@ -14,10 +14,11 @@ def add_viewer_parser(sub) -> None:
                        description="Serve a generated scene (its cameras moving along their trajectories, frames, "
                                    "blur levels and events on a time line) or one or more trained runs (rendered "
                                    "from the browser's camera at the slider's time; a second run is shown beside "
-                                   "the first at the same view and time). Stop with Ctrl-C.")
+                                   "the first at the same view and time), or one event file (.h5, e.g. from `e4dgs "
+                                   "import`: its stream on a time line from its first event). Stop with Ctrl-C.")
     p.add_argument("paths", nargs="+", type=Path, metavar="DATA_OR_RUN",
-                   help="a scene folder (data/quick/hinge) or run folders (runs/quick/hinge/e4dgs-<hash>, or its "
-                        "prefix runs/quick/hinge/e4dgs when only one run matches)")
+                   help="a scene folder (data/quick/hinge), run folders (runs/quick/hinge/e4dgs-<hash>, or its "
+                        "prefix runs/quick/hinge/e4dgs when only one run matches), or an event file (.h5)")
     p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=port_int, default=8080, help="port (default 8080; 0 picks a free one)")
     p.add_argument("--slowmo", type=positive_float, default=100.0,
@@ -50,28 +51,45 @@ def check_host(host: str, timeout_s: float = 3.0) -> None:
         pool.shutdown(wait=False)
 
 
+def _event_file_viewer(args: argparse.Namespace):
+    from simulator.h5io import EventFileError
+    from viewer.event_stream import EventStreamViewer
+
+    try:
+        viewer = EventStreamViewer(args.paths[0], host=args.host, port=args.port)
+    except (EventFileError, ValueError) as exc:
+        raise SystemExit(f"error: {exc}") from None
+    except OSError as exc:
+        raise SystemExit(f"error: cannot serve on {args.host}:{args.port} ({exc.strerror or exc}); "
+                         "choose another --port") from None
+    return viewer, [viewer.label]
+
+
 def run_viewer(args: argparse.Namespace) -> int:
     from viewer.sources import open_source
 
     check_host(args.host)
-    sources = [open_source(p) for p in args.paths]          # a bad path: one line, before the server starts
-    if len(sources) > 1 and any(s.model is None for s in sources):
-        raise SystemExit("error: several paths must all be runs (a dataset is shown alone, or beside a run "
-                         "through the run's own scene)")
-    from viewer.app import Viewer
+    if len(args.paths) == 1 and args.paths[0].is_file() and args.paths[0].suffix == ".h5":
+        viewer, labels, notes = *_event_file_viewer(args), []    # a bare event file: its stream on a time line
+    else:
+        sources = [open_source(p) for p in args.paths]      # a bad path: one line, before the server starts
+        if len(sources) > 1 and any(s.model is None for s in sources):
+            raise SystemExit("error: several paths must all be runs (a dataset is shown alone, or beside a run "
+                             "through the run's own scene)")
+        from viewer.app import Viewer
 
-    try:
-        viewer = Viewer(sources, host=args.host, port=args.port, slowmo=args.slowmo)
-    except OSError as exc:
-        raise SystemExit(f"error: cannot serve on {args.host}:{args.port} ({exc.strerror or exc}); "
-                         "choose another --port") from None
+        try:
+            viewer = Viewer(sources, host=args.host, port=args.port, slowmo=args.slowmo)
+        except OSError as exc:
+            raise SystemExit(f"error: cannot serve on {args.host}:{args.port} ({exc.strerror or exc}); "
+                             "choose another --port") from None
+        labels, notes = [s.label for s in sources], [f"{s.path}: {s.note}" for s in sources if s.note]
     done = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: done.set())
-    print(f"viewer: {' | '.join(s.label for s in sources)}")
-    for s in sources:
-        if s.note:
-            print(f"viewer: {s.path}: {s.note}")
+    print(f"viewer: {' | '.join(labels)}")
+    for note in notes:
+        print(f"viewer: {note}")
     print(f"viewer: open {viewer.url} in a browser (Ctrl-C stops)", flush=True)
     try:
         done.wait()

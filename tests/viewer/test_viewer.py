@@ -234,3 +234,62 @@ def test_a_browsers_aborted_handshake_prints_nothing_but_other_errors_still_do(c
             logging.LoggerAdapter(log, {}).error("opening handshake failed", exc_info=True)
         log.error("something else went wrong")
     assert [r.getMessage() for r in caplog.records] == ["something else went wrong"]
+
+
+def _epoch_file(tmp_path) -> tuple[Path, np.ndarray]:
+    from simulator.events import EventStream, make_events
+    from simulator.h5io import write_events
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    t = 1_700_000_000_123_456 + np.sort(rng.integers(0, 500_000, n))
+    s = EventStream(make_events(t, rng.integers(0, 64, n), rng.integers(0, 48, n), rng.choice([-1, 1], n)), 64, 48)
+    return write_events(tmp_path / "rec.h5", s), t
+
+
+def test_an_epoch_stamped_event_file_is_shown_from_its_first_event(tmp_path):
+    """A recording at Unix-epoch times in the viewer: the time line starts at its first event, and the
+    picture of a window holds exactly the events whose absolute times lie in it."""
+    from viewer.event_stream import EventStreamViewer
+
+    path, t = _epoch_file(tmp_path)
+    v = EventStreamViewer(path, port=0)
+    try:
+        assert (v.start_us, v.end_us) == (int(t[0]), int(t[-1]) + 1) and "1700000000" in v.label
+        title, img = v.picture(100_000, 20_000)
+        t1 = int(t[0]) + 100_000
+        expected = int(np.sum((t >= t1 - 20_000) & (t < t1)))
+        assert title.startswith(f"{expected:,} events in [{t1 - 20_000}, {t1}) us") and img.shape == (48 + 18, 64, 3)
+        assert v.picture(-5, 1000)[0].startswith("0 events") and v.picture(10 ** 12, 10 ** 12)[0].startswith("4,000 events")
+    finally:
+        v.stop()
+
+
+def test_the_command_serves_an_epoch_stamped_recording_in_a_browser(tmp_path):
+    _need_chromium()
+    from viewer.headless import HeadlessChromium
+
+    path, t = _epoch_file(tmp_path)
+    proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", str(path), "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        url = None
+        for line in proc.stdout:
+            if "open http" in line:
+                url = line.split("open ")[1].split()[0]
+                break
+        assert url
+        browser = HeadlessChromium(900, 600)
+        try:
+            browser.open(url)
+            _wait(lambda: browser.evaluate("document.body.innerText.includes('events in [')"))
+            text = browser.evaluate("document.body.innerText")
+            assert f"{int(t[0])} us" in text and "4,000 events" in text
+        finally:
+            browser.close()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0 and "viewer: stopped" in out and "Traceback" not in err, err[-2000:]
