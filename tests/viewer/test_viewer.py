@@ -161,6 +161,16 @@ def test_paths_that_are_neither_dataset_nor_run_are_refused_in_one_line(trained,
     assert json.loads(run_json.read_text())["scene_dir"]
 
 
+def _serve(paths: list[str], cwd: Path, env: dict | None = None):
+    """`e4dgs viewer PATHS --port 0` started; (process, the URL it printed, or None)."""
+    proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", *paths, "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd, env=env)
+    for line in proc.stdout:
+        if "open http" in line:
+            return proc, line.split("open ")[1].split()[0]
+    return proc, None
+
+
 def _descendants(pid: int) -> set[int]:
     out = subprocess.run(["ps", "-e", "-o", "pid=,ppid="], capture_output=True, text=True).stdout.split()
     children = {}
@@ -185,14 +195,8 @@ def test_the_command_serves_then_stops_on_ctrl_c_leaving_no_process_and_no_file(
     env = {**os.environ, "HOME": str(home), "TMPDIR": str(tmp_path / "tmp")}
     (tmp_path / "tmp").mkdir()
     before = {p for p in motion_scene.rglob("*")}
-    proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", str(motion_scene), "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work, env=env)
+    proc, url = _serve([str(motion_scene)], cwd=work, env=env)
     try:
-        url = None
-        for line in proc.stdout:
-            if "open http" in line:
-                url = line.split("open ")[1].split()[0]
-                break
         assert url and url.startswith("http://localhost:")
         browser = HeadlessChromium(900, 600)
         try:
@@ -270,14 +274,8 @@ def test_the_command_serves_an_epoch_stamped_recording_in_a_browser(tmp_path):
     from viewer.headless import HeadlessChromium
 
     path, t = _epoch_file(tmp_path)
-    proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", str(path), "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    proc, url = _serve([str(path)], cwd=tmp_path)
     try:
-        url = None
-        for line in proc.stdout:
-            if "open http" in line:
-                url = line.split("open ")[1].split()[0]
-                break
         assert url
         browser = HeadlessChromium(900, 600)
         try:
