@@ -42,6 +42,12 @@ class _AbortedHandshakes(logging.Filter):
         return record.getMessage() != "opening handshake failed"
 
 
+def server_url(server) -> str:
+    """The address a browser opens for a viser server."""
+    host = server.get_host()
+    return f"http://{'localhost' if host in ('0.0.0.0', '127.0.0.1') else host}:{server.get_port()}"
+
+
 def quiet_aborted_handshakes() -> None:
     """Keep websockets' aborted-handshake tracebacks out of the console (installed once per process)."""
     log = logging.getLogger("websockets.server")
@@ -144,8 +150,7 @@ class Viewer:
 
     @property
     def url(self) -> str:
-        host = self.server.get_host()
-        return f"http://{'localhost' if host in ('0.0.0.0', '127.0.0.1') else host}:{self.port}"
+        return server_url(self.server)
 
     # -- scene -----------------------------------------------------------------------------------
     def _pose(self, camera: int, t: float) -> np.ndarray:

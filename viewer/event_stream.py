@@ -14,7 +14,7 @@ import numpy as np
 
 from simulator.event_file import EventFile
 from simulator.event_pictures import annotate, event_frame
-from viewer.app import quiet_aborted_handshakes
+from viewer.app import quiet_aborted_handshakes, server_url
 
 DEFAULT_WINDOW_US = 2_000
 
@@ -34,13 +34,11 @@ class EventStreamViewer:
         warnings.filterwarnings("ignore", message="Queued a .* on a closed connection")
         quiet_aborted_handshakes()
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
-        self.port = self.server.get_port()
         self.server.on_client_connect(self._connect)
 
     @property
     def url(self) -> str:
-        host = self.server.get_host()
-        return f"http://{'localhost' if host in ('0.0.0.0', '127.0.0.1') else host}:{self.port}"
+        return server_url(self.server)
 
     @property
     def label(self) -> str:
