@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import add_ray_arguments, float_in, name_list, ray_options
+from common.argtypes import add_ray_arguments, float_in, int_in, name_list, ray_options
 from common.fileio import output_inside_input
 
 
@@ -23,6 +23,12 @@ def add_bench_parser(sub) -> None:
                         "study runs only when named, as `make speed-study`)")
     p.add_argument("--ablation-seeds", default=None,
                    help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")
+    p.add_argument("--seeds", type=int_in(1, 100, "training seeds per cell"), default=None,
+                   help="train every main cell at seeds 0 .. N-1 (default: the preset's seeds, 1): the tables give the "
+                        "mean and standard deviation over seeds and call differences within the spread ties")
+    p.add_argument("--reuse-older", action="store_true",
+                   help="keep rows made by another code version or dataset (the same resolved config) instead of "
+                        "training them again; the tables mark each with the version it came from")
     p.add_argument("--data", type=Path, default=None, help="dataset root (default data/<dataset>)")
     p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<preset>)")
     p.add_argument("--report", action="store_true", help="only regenerate tables and plots from results.jsonl")
@@ -111,25 +117,29 @@ def run_score(args: argparse.Namespace) -> int:
                          tuple(cfg.snapshot_metrics) if cfg is not None else ("psnr", "ssim"), args.label)
     all_rows = append_rows(out / "results.jsonl", rows, tuple(cfg.cells) if cfg is not None else ())
     if cfg is not None:
-        all_rows = tabled_rows(cfg, all_rows, out)
+        all_rows = tabled_rows(cfg, all_rows, out, args.data)
     paths = write_report(all_rows, out, report_header(name, cfg) if cfg is not None else "", cfg)
     print(f"score: {len(rows)} row(s) added to {out / 'results.jsonl'}; wrote " + ", ".join(str(p) for p in paths))
     return 0
 
 
-def tabled_rows(cfg, rows: list[dict], out: Path) -> list[dict]:
-    """The rows the tables show: the preset's current ones (benchmark.config.current_rows), saying how
-    many stale rows results.jsonl keeps out of them."""
+def tabled_rows(cfg, rows: list[dict], out: Path, data_root: Path | None = None, reuse_older: bool = False) -> list[dict]:
+    """The rows the tables show: the preset's current ones (benchmark.config.current_rows; with
+    `reuse_older` also those of another code version or dataset, marked), saying how many rows
+    results.jsonl keeps out of them."""
     from benchmark.config import current_rows
 
-    kept, stale = current_rows(cfg, rows)
+    kept, stale = current_rows(cfg, rows, data_root, reuse_older)
     if stale:
-        print(f"bench: {len(stale)} row(s) of {out / 'results.jsonl'} left out of the tables: no job of the preset "
-              f"has their config any more (e.g. {stale[0]['key']})", file=sys.stderr)
+        print(f"bench: {len(stale)} row(s) of {out / 'results.jsonl'} left out of the tables: made by another config, "
+              f"code version or dataset than the preset's jobs now (e.g. {stale[0]['key']}; `--reuse-older` shows "
+              "those of the same config, marked)", file=sys.stderr)
     return kept
 
 
 def run_bench_cli(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from benchmark.config import load_bench
     from benchmark.report import write_report
     from benchmark.rows import read_results
@@ -142,15 +152,17 @@ def run_bench_cli(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {exc}") from None
     name = Path(args.preset).stem
     if args.ablation_seeds:
-        from dataclasses import replace
         try:
             seeds = tuple(int(s) for s in args.ablation_seeds.split(",") if s.strip())
             cfg = replace(cfg, ablation=replace(cfg.ablation, seeds=seeds))
         except (ValueError, ConfigError) as exc:
             raise SystemExit(f"error: --ablation-seeds: expected distinct integers >= 0 separated by commas "
                              f"({exc})") from None
+    if args.seeds is not None:
+        cfg = replace(cfg, seeds=args.seeds)
     out = args.out or Path("runs") / name
-    inside = output_inside_input(out, {"--data": args.data or Path("data") / cfg.dataset})
+    data_root = args.data or Path("data") / cfg.dataset
+    inside = output_inside_input(out, {"--data": data_root})
     if inside:
         raise SystemExit(f"error: --out {inside}")
     scenes, cells = args.scenes, args.methods
@@ -167,9 +179,9 @@ def run_bench_cli(args: argparse.Namespace) -> int:
         if unknown:
             raise SystemExit(f"error: --studies: {', '.join(map(repr, unknown))} is not a study (main, blur, ablation, speed)")
         # a refused job, dataset or results file is a typed error: e4dgs.cli prints it as one line
-        run_bench(cfg, name, args.data or Path("data") / cfg.dataset, out, scenes, cells, studies,
-                  progress=not args.no_progress, ray=ray_options(args))
-    rows = tabled_rows(cfg, read_results(out / "results.jsonl"), out)
+        run_bench(cfg, name, data_root, out, scenes, cells, studies, progress=not args.no_progress,
+                  ray=ray_options(args), reuse_older=args.reuse_older)
+    rows = tabled_rows(cfg, read_results(out / "results.jsonl"), out, data_root, args.reuse_older)
     paths = write_report(rows, out, header, cfg)
     print("bench: wrote " + ", ".join(str(p) for p in paths))
     failed = [r["key"] for r in rows if r.get("status") == "failed" and (not scenes or r.get("scene") in scenes)

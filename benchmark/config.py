@@ -96,6 +96,13 @@ class BenchConfig:
     # gives every cell the same training seconds on a slower scene: {scene: {cell: {dotted key: value}}}
     scene_overrides: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     lpips_net: str = "vgg"
+    # training seeds of every main cell (train.seed 0 .. seeds-1; `e4dgs bench --seeds N`): the tables
+    # give the mean and spread over them, and call differences within the spread ties
+    seeds: int = 1
+    # the seed spread (standard deviation over training seeds) of each cell's scores on one scene, as
+    # measured (docs/benchmark.md): what the tables take as a one-seed cell's spread where results.jsonl
+    # holds no cell of its kind at two seeds or more: {cell: {psnr: dB, ssim: ..., lpips: ...}}
+    seed_spread: dict[str, dict[str, float]] = field(default_factory=dict)
     snapshot_metrics: tuple[str, ...] = ("psnr", "ssim")    # at 10/25/50 % (the final model gets all)
     description: str = ""
 
@@ -127,6 +134,13 @@ class BenchConfig:
                     raise ConfigError(f"blur.levels: {level!r} is not one of speed_levels ({', '.join(self.speed_levels)})")
         if self.ablation.scene and self.ablation.base not in self.cells:
             raise ConfigError(f"ablation.base: {self.ablation.base!r} is not a cell")
+        for cell, spread in self.seed_spread.items():
+            if cell not in self.cells:
+                raise ConfigError(f"seed_spread: {cell!r} is not a cell")
+            for metric, value in spread.items():
+                if metric not in ("psnr", "ssim", "lpips") or not 0 <= value < 100:
+                    raise ConfigError(f"seed_spread.{cell}.{metric}: expected psnr, ssim or lpips with a standard "
+                                      f"deviation >= 0, got {value!r}")
         for scene, per_cell in self.scene_overrides.items():
             if scene not in self.scenes:
                 raise ConfigError(f"scene_overrides: {scene!r} is not one of the scenes ({', '.join(self.scenes)})")
@@ -176,6 +190,7 @@ class Job:
     dataset: str = ""             # another dataset preset's folder (the realistic-sensor variants); "": the preset's
     label: str = ""               # the cell's label in the tables
     inputs: tuple[str, ...] = ()  # what its method sees (Method.inputs): the tables read it from the row
+    data_root: str = ""           # the dataset folder its scene is read from (data/<dataset>)
 
     @property
     def data_scene(self) -> str:
@@ -202,39 +217,79 @@ class Job:
                 "seed": self.seed, "method": self.method, "config": self.config, "overrides": self.overrides,
                 "speed": self.speed, "data_scene": self.data_scene, "dataset": self.dataset,
                 "config_hash": self.config_hash(), "run_dir": self.folder, "label": self.label or self.cell,
-                "inputs": list(self.inputs)}
+                "inputs": list(self.inputs), "identity": dict(self.identity_parts),
+                "code_version": self.identity_parts["code"]}
+
+    @functools.cached_property
+    def method_config(self):
+        """The typed config it trains with: its config file, then its overrides, resolved once per job
+        (every field, after defaults, as the trainer sees it). ConfigError names the job."""
+        from recon.api import resolve_config
+
+        try:
+            return resolve_config(self.method, str(REPO / self.config) if self.config else None, self.overrides,
+                                  "the preset's overrides of this job (cells, studies, scene_overrides)")
+        except (ConfigError, ValueError) as exc:
+            raise ConfigError(f"bench job {self.key} ({self.method}, {self.config or 'defaults'}): {exc}") from None
 
     def _input_digests(self) -> dict[str, str]:
-        """The method's `input_digests` under this job's config ({} while the config is invalid: the job
-        then fails with the config's own error when it runs)."""
-        from recon.api import resolve_config
-        from recon.method import Method
+        """The method's `input_digests` under this job's config (E2VID + D3DGS: its network's weights)."""
         from recon.methods import get_method
 
-        method = get_method(self.method)
-        if method.input_files.__func__ is Method.input_files.__func__:     # reads no other file: nothing to resolve
-            return {}
-        try:
-            cfg = resolve_config(self.method, str(REPO / self.config) if self.config else None, self.overrides)
-        except (ConfigError, ValueError):
-            return {}
-        return method.input_digests(cfg)
+        return get_method(self.method).input_digests(self.method_config)
+
+    @property
+    def data_dir(self) -> Path:
+        """The scene folder it trains on: <data root>/<scene or speed variant>, or that folder in the
+        sibling dataset job.dataset."""
+        root = Path(self.data_root) if self.data_root else Path("data") / "?"
+        return (root.parent / self.dataset if self.dataset else root) / self.data_scene
+
+    @functools.cached_property
+    def identity_parts(self) -> dict[str, str]:
+        """What makes its result, each as a digest: `config` (the method and its resolved config, every
+        field), `inputs` (files the method reads besides config and scene: E2VID's weights), `dataset`
+        (the scene folder's content, scene_format.manifest.content_digest, with its name) and `code`
+        (common.provenance.code_version, plus a plug-in method's own source file). A row whose parts
+        differ from its job's was made by something else."""
+        from common.config import dump_config
+        from common.provenance import code_version
+        from recon.methods import get_method
+        from scene_format.manifest import folder_digest
+
+        code = code_version()
+        source = _source_file(get_method(self.method))
+        if source is not None and not source.is_relative_to(REPO):      # a plug-in's code is its own file
+            code = _sha({"toolkit": code, "plugin": hashlib.sha256(source.read_bytes()).hexdigest()})
+        return {"config": _sha({"method": self.method, "config": dump_config(self.method_config)}),
+                "inputs": _sha(self._input_digests()),
+                "dataset": _sha({"scene": self.data_scene, "dataset": self.dataset,
+                                 "content": folder_digest(self.data_dir)}),
+                "code": code}
 
     def config_hash(self) -> str:
-        """The digest of what it trains (method, config file, overrides, speed, dataset and the method's
-        other input files), computed once per job."""
+        """The digest of everything that makes its result (identity_parts), computed once per job: the
+        job's identity, and the name of its training folder."""
         return self._config_hash
 
     @functools.cached_property
     def _config_hash(self) -> str:
-        payload = {"method": self.method, "overrides": self.overrides,
-                   "config": (REPO / self.config).read_text() if self.config else ""}
-        if self.speed is not None:      # another scene folder: another model
-            payload["speed"] = self.speed
-        if self.dataset:
-            payload["dataset"] = self.dataset
-        payload.update(self._input_digests())      # files the method reads besides its config (E2VID's weights)
-        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:16]
+        return _sha(self.identity_parts)
+
+
+def _sha(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _source_file(cls: type) -> Path | None:
+    """The resolved source file defining `cls` (None where it has none)."""
+    import inspect
+
+    try:
+        path = inspect.getsourcefile(cls)
+    except TypeError:
+        return None
+    return Path(path).resolve() if path and Path(path).is_file() else None
 
 
 def _at_speed(cfg: BenchConfig, scene: str, cell: str, speed: float | None) -> dict[str, Any]:
@@ -257,9 +312,11 @@ def _described(cfg: BenchConfig, job: Job) -> Job:
     return replace(job, label=cfg.label(job.cell), inputs=tuple(get_method(job.method).inputs))
 
 
-def jobs(cfg: BenchConfig) -> list[Job]:
-    """Every training run of a preset, main table first; studies reuse main runs where they coincide.
-    ConfigError names a cell whose method is not registered (bundled or plug-in)."""
+def jobs(cfg: BenchConfig, data_root: Path | None = None) -> list[Job]:
+    """Every training run of a preset, main table first (each cell at each of `cfg.seeds` seeds);
+    studies reuse main runs where they coincide. `data_root`: the dataset folder (default
+    data/<dataset>), whose scene folders' digests are part of each job's identity. ConfigError names a
+    cell whose method is not registered (bundled or plug-in)."""
     from recon.methods import get_method
 
     for name, c in cfg.cells.items():
@@ -267,15 +324,19 @@ def jobs(cfg: BenchConfig) -> list[Job]:
             get_method(c.method)
         except ValueError as exc:
             raise ConfigError(f"cells.{name}.method: {exc}") from None
-    return [_described(cfg, j) for j in _jobs(cfg)]
+    root = str(data_root if data_root is not None else Path("data") / cfg.dataset)
+    return [replace(_described(cfg, j), data_root=root) for j in _jobs(cfg)]
 
 
 def _jobs(cfg: BenchConfig) -> list[Job]:
     out: list[Job] = []
-    for scene in cfg.scenes:
-        for name, c in cfg.cells.items():
-            out.append(Job("main", scene, name, "", c.method, c.config, _at_speed(cfg, scene, name, cfg.cell_speed(name)),
-                           speed=cfg.cell_speed(name)))
+    for seed in range(cfg.seeds):      # seed 0 (the configs' default) keeps the plain key
+        for scene in cfg.scenes:
+            for name, c in cfg.cells.items():
+                seeded = {"train.seed": seed} if seed else {}
+                out.append(Job("main", scene, name, "", c.method, c.config,
+                               {**_at_speed(cfg, scene, name, cfg.cell_speed(name)), **seeded},
+                               seed=seed or None, speed=cfg.cell_speed(name)))
     b = cfg.blur
     if b.scene:
         from recon.methods import get_method
@@ -316,22 +377,62 @@ def _jobs(cfg: BenchConfig) -> list[Job]:
     return out
 
 
-def current_rows(cfg: BenchConfig, rows: list[dict]) -> tuple[list[dict], list[dict]]:
-    """(rows of the preset as it is now, stale rows). A bench row is stale when no job of the preset has
-    its key and config hash any more (another recipe, cap or speed list made it; results.jsonl keeps
-    it): the tables must not mix configs. Rows scored from outside (`e4dgs score`) are always kept,
-    and ablation rows are matched at their own seed (the seeds are chosen per run). The kept rows come in
-    the preset's scene order (stably), so the tables' columns do not follow which scene was re-run last."""
+def current_rows(cfg: BenchConfig, rows: list[dict], data_root: Path | None = None,
+                 reuse_older: bool = False) -> tuple[list[dict], list[dict]]:
+    """(rows of the preset as it is now, stale rows). A bench row is current when a job of the preset has
+    its key and identity (config_hash: resolved config, inputs, dataset, code). Other rows stay in
+    results.jsonl but out of the tables, which must not mix what made them: another recipe, cap or speed
+    list, another dataset or code version. With `reuse_older`, a row of a current job's key made by
+    another code version or dataset (the same resolved config and inputs; rows from before identities
+    were recorded: their config unknown) is kept, marked with `older` (what differs, for the tables).
+    Rows scored from outside (`e4dgs score`) are always kept, and main and ablation rows are matched at
+    their own seed (the seeds are chosen per run). The kept rows come in the preset's scene order
+    (stably), so the tables' columns do not follow which scene was re-run last."""
     seeds = tuple(sorted({*cfg.ablation.seeds, *(r["seed"] for r in rows if r.get("study") == "ablation"
                                                   and isinstance(r.get("seed"), int))}))
-    wanted = {(j.key, j.config_hash()) for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=seeds)))}
+    main_seeds = max([cfg.seeds] + [r["seed"] + 1 for r in rows if r.get("study") == "main"
+                                    and isinstance(r.get("seed"), int)])
+    grid = jobs(replace(cfg, seeds=main_seeds, ablation=replace(cfg.ablation, seeds=seeds)), data_root)
+    by_key = {j.key: j for j in grid}
     kept, stale = [], []
     for r in rows:
-        (kept if r.get("external") or (r.get("key"), r.get("config_hash")) in wanted else stale).append(r)
+        job = by_key.get(r.get("key"))
+        note = None if r.get("external") or job is None else older_note(r, job)
+        if r.get("external") or (job is not None and note is None):
+            kept.append(r)
+        elif note and reuse_older and note != "config":
+            kept.append({**r, "older": note})
+        else:
+            stale.append(r)
     order = {s: i for i, s in enumerate(cfg.scenes)}
     kept.sort(key=lambda r: order.get(r.get("scene"), len(order)))
     return kept, stale
 
 
+def older_note(row: dict, job: Job) -> str | None:
+    """None when `row` was made by `job` as it is now; else what made it differ: "config" (another
+    resolved config or input file: never reused), or a note for the tables naming the code version and
+    dataset it came from ("code 1a2b3c4d (git 5e6f7a8), dataset ..." ; "unknown version (git ...)" for a
+    row from before identities were recorded)."""
+    try:
+        if row.get("config_hash") == job.config_hash():
+            return None
+        now = job.identity_parts
+    except ConfigError:                    # the preset's recipe no longer resolves: the row is stale
+        return "config"
+    then = row.get("identity")
+    git = f" (git {row['git_commit'][:7]})" if row.get("git_commit") else ""
+    if not isinstance(then, dict):
+        return f"unknown version{git}"
+    if then.get("config") != now["config"] or then.get("inputs") != now["inputs"]:
+        return "config"
+    parts = [f"code {then.get('code', '?')[:8]}{git}" if then.get("code") != now["code"] else "",
+             f"dataset {then.get('dataset', '?')[:8]}" if then.get("dataset") != now["dataset"] else ""]
+    return ", ".join(p for p in parts if p) or "unknown version"
+
+
 def dump(cfg: BenchConfig) -> dict:
     return to_dict(cfg)
+
+
+BenchConfig.BOUNDS = {"seeds": (1, 100, "training seeds per cell")}

@@ -27,14 +27,16 @@ def job_data_dir(job: Job, data_root: Path) -> Path:
     return (data_root.parent / job.dataset if job.dataset else data_root) / job.data_scene
 
 
-def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placement=None, method_cfg=None) -> dict:
+def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placement=None, method_cfg=None,
+                   views_out: Path | None = None) -> dict:
     """Scores of `model` on the scene's test views through `recon.evaluate`, rendered on the run's
     (device, backend) (default: CPU, auto), over the whole images and, where the scene has dynamic
     masks, over the moving pixels (`*_dyn`); `method_cfg`: the run's config, already resolved."""
     from recon.api import evaluate
 
     device, backend = placement or ("cpu", "auto")
-    return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device, config=method_cfg)
+    return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device, config=method_cfg,
+                    views_out=views_out)
 
 
 def has_masks(job: Job, data_root: Path) -> bool:
@@ -51,15 +53,8 @@ def complete_row(row: dict, job: Job, cfg: BenchConfig, data_root: Path) -> bool
 
 
 def resolve_job(job: Job):
-    """The typed method config of a job (its config file plus overrides); ConfigError names the job."""
-    from common.config import ConfigError
-    from recon.api import resolve_config
-
-    try:
-        return resolve_config(job.method, str(REPO / job.config) if job.config else None, job.overrides,
-                              "the preset's overrides of this job (cells, studies, scene_overrides)")
-    except (ConfigError, ValueError) as exc:
-        raise ConfigError(f"bench job {job.key} ({job.method}, {job.config or 'defaults'}): {exc}") from None
+    """The typed method config of a job, resolved once (Job.method_config); ConfigError names the job."""
+    return job.method_config
 
 
 def data_stats(dataset: SceneDataset) -> dict:
@@ -99,7 +94,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     model, placement = result.model, (result.device, result.backend)       # score where it trained
     t1 = time.time()
     lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
-    final = evaluate_model(model, dataset, lpips_net, placement, method_cfg)
+    final = evaluate_model(model, dataset, lpips_net, placement, method_cfg, out_root / job.folder / VIEWS_DIR)
     # the floor: what the method's own starting model scores after the same correction (an events-only
     # score means something about events only as far as it rises above this)
     floor = evaluate_model(result.initial, dataset, None, placement, method_cfg)
@@ -120,7 +115,34 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         channels=model.meta.channels, device=result.device, backend=result.backend, precision=model.meta.precision,
         cpu=cpu_summary(), wall_s=result.train_s, train_elapsed_s=round(result.elapsed_s, 1),
         eval_s=round(time.time() - t1, 1), snapshots=snapshots, versions=versions(), git_commit=git_commit(),
-        lpips_net=lpips_net).to_dict()
+        lpips_net=lpips_net, recipe=recipe_of(method_cfg), gpu=gpu_name(result.device),
+        views_sha256=final["views_sha256"], views_dir=f"{job.folder}/{VIEWS_DIR}").to_dict()
+
+
+VIEWS_DIR = "views"         # a training folder's scored test views (recon.view_record), the row's audit
+
+
+def recipe_of(method_cfg) -> dict:
+    """The resolved fields that decide a result, for the tables and a reader of the row (the whole
+    config is the run's run.json; its digest is the row's identity.config): iterations, seed, the
+    deformation field, the coarse-to-fine schedule and the precision asked for (the row's `precision`
+    is what ran)."""
+    t = getattr(method_cfg, "train", None)
+    if t is None:                         # a plug-in without the shared TrainConfig
+        return {}
+    c2f = t.coarse_to_fine
+    return {"iterations": t.iterations, "seed": t.seed,
+            "deform_field": t.deform_field.kind if t.deform else "none",
+            "coarse_to_fine": [[f, u] for f, u in zip(c2f.factors, c2f.until)], "precision": t.precision}
+
+
+def gpu_name(device: str) -> str | None:
+    """The GPU's model for a run on CUDA (None on the CPU)."""
+    if not str(device).startswith("cuda"):
+        return None
+    import torch
+
+    return torch.cuda.get_device_name(torch.device(device))
 
 
 def reused_row(job: Job, row: dict) -> dict:

@@ -84,6 +84,12 @@ class ResultRow:
     n_dyn_images: int = ABSENT
     floor_psnr_dyn: float | None = ABSENT
     cpu: str = ABSENT                 # the bench's runs: the CPU they trained on
+    gpu: str | None = ABSENT          # the GPU's model (null on the CPU)
+    identity: dict = ABSENT           # the digests its config_hash is made of (benchmark.config.Job.identity_parts)
+    code_version: str = ABSENT        # identity["code"]: common.provenance.code_version
+    recipe: dict = ABSENT             # the resolved fields that decide a result (benchmark.job_run.recipe_of)
+    views_sha256: str = ABSENT        # SHA-256 of its views.json (per-view scores, render digests)
+    views_dir: str = ABSENT           # that file's folder, relative to the results folder
     external: bool | None = ABSENT           # `e4dgs score`: an outside method's renders
     scored_unix: int | None = ABSENT
     scored_as: str | None = ABSENT           # a reused row: the key of the row it was scored as

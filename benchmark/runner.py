@@ -5,8 +5,11 @@ runs/<preset>/
   <scene>/<method>-<hash>/ the training folder (shared by jobs with the same method and config)
   bench.json               the preset as run
 
-A job whose row exists with the same config hash is reused; a training folder resumes from its
-checkpoint, so a killed benchmark picks up where it stopped. Each row holds the final model's
+A job whose row exists with the same identity (config_hash: its resolved config, input files, the
+scene folder's content and the code version, benchmark.config.Job.identity_parts) is reused; a row
+made by another identity is not: the job trains again, unless `reuse_older`, which keeps a row of
+the same resolved config made by another code version or dataset (the tables mark it). A training
+folder resumes from its checkpoint, so a killed benchmark picks up where it stopped. Each row holds the final model's
 PSNR / SSIM / LPIPS (means of per-image values over the scene's held-out views), snapshot scores
 against training wall-clock seconds, iterations, Gaussian count, package versions, git commit.
 """
@@ -19,8 +22,8 @@ from functools import partial
 from pathlib import Path
 from typing import Callable
 
-from benchmark.config import BenchConfig, Job, dump, jobs  # noqa: F401 - jobs: the grid, for callers
-from benchmark.job_run import JobExecutor, complete_row, resolve_job, reused_row, run_jobs_here
+from benchmark.config import BenchConfig, Job, dump, jobs, older_note
+from benchmark.job_run import JobExecutor, complete_row, reused_row, run_jobs_here
 from benchmark.rows import read_results, write_results  # noqa: F401 - read_results: for callers
 from common.fileio import write_text_atomic
 
@@ -45,13 +48,14 @@ def ensure_dataset(dataset: str, scenes: list[str], data_root: Path, log: Callab
 
 def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Path, scenes: list[str] | None = None,
               cells: list[str] | None = None, studies: tuple[str, ...] = ("main", "blur", "ablation"),
-              progress: bool = True, log: Callable[[str], None] = print, ray=None) -> list[dict]:
+              progress: bool = True, log: Callable[[str], None] = print, ray=None,
+              reuse_older: bool = False) -> list[dict]:
     """Run every job not yet in results.jsonl, in this process one after another, or as Ray tasks
     when `ray` is a common.taskpool.RayOptions (Ray is imported only then). Returns all rows."""
-    todo = [j for j in jobs(cfg) if j.study in studies and (not scenes or j.scene in scenes)
+    todo = [j for j in jobs(cfg, data_root) if j.study in studies and (not scenes or j.scene in scenes)
             and (not cells or j.cell in cells)]
     needed = sorted({j.data_scene for j in todo if not j.dataset})
-    resolved = {j.key: resolve_job(j) for j in todo}   # every job's config, checked before any work
+    resolved = {j.key: j.method_config for j in todo}   # every job's config, checked before any work
     t_start = time.time()
     ensure_dataset(cfg.dataset, needed, data_root, log, ray)
     for other in sorted({j.dataset for j in todo if j.dataset}):    # the realistic-sensor variants
@@ -64,10 +68,21 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     by_key = {j.key: j for j in todo}
     done = {(r["key"], r["config_hash"]) for r in rows
             if r.get("status") != "failed" and (r["key"] not in by_key or complete_row(r, by_key[r["key"]], cfg, data_root))}
+    older = {r["key"]: older_note(r, by_key[r["key"]]) for r in rows if r.get("key") in by_key
+             and (r["key"], r.get("config_hash")) not in done and r.get("status") != "failed"}
+    kept_older = {k: n for k, n in older.items() if reuse_older and n and n != "config"
+                  and complete_row(next(r for r in rows if r["key"] == k), by_key[k], cfg, data_root)}
     if cfg.description:
         log(f"bench {preset_name}: " + " ".join(cfg.description.split()))
     log(f"bench {preset_name}: {len(todo)} job(s) on {', '.join(needed)}; "
         f"{sum((j.key, j.config_hash()) in done for j in todo)} already in {results_path}")
+    newer = {k: n for k, n in older.items() if n and n != "config"}
+    if kept_older:
+        log(f"bench {preset_name}: --reuse-older keeps {len(kept_older)} row(s) made by another version "
+            f"(marked in the tables), e.g. {next(iter(kept_older))}: {next(iter(kept_older.values()))}")
+    elif newer:
+        log(f"bench {preset_name}: {len(newer)} row(s) were made by another version and train again "
+            f"(e.g. {next(iter(newer))}: {next(iter(newer.values()))}; --reuse-older keeps them, marked)")
 
     def record(new_rows: list[dict]) -> None:          # the driver is the only writer of results.jsonl
         nonlocal rows
@@ -85,7 +100,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
                      and complete_row(r, job, cfg, data_root)), None)
 
     t0 = time.time()
-    remaining = [j for j in todo if (j.key, j.config_hash()) not in done]
+    remaining = [j for j in todo if (j.key, j.config_hash()) not in done and j.key not in kept_older]
     reusable = [(j, scored(j)) for j in remaining]
     if any(r for _, r in reusable):
         record([reused_row(j, r) for j, r in reusable if r])

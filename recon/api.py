@@ -136,15 +136,17 @@ def fit(scene_dir: str | Path | SceneDataset, method: str = "d3dgs", config: Any
 
 def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, split: str = "test",
              lpips_net: str | None = None, backend: str = "auto", device: str | None = None, dynamic: bool = True,
-             config: Any = None) -> dict:
+             config: Any = None, views_out: str | Path | None = None) -> dict:
     """Scores of a trained model on a scene's held-out views, the way the benchmark scores them: the
     model's own method and config (stored in it) pick the channels and the correction (E-4DGS's
     log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net); where the
     scene has dynamic-region masks (and `dynamic`), the same over the moving pixels (`*_dyn`).
     `scene_dir` is a scene folder or one already opened. Rendered on `device` (default: where the model
     is) with `backend`. `config`: the model's method config already resolved (default: resolved from
-    the model's own)."""
-    from common.metrics.image import score_pairs
+    the model's own). With `views_out`, the predictions are scored as 16-bit images and kept there with
+    every view's scores (recon.view_record: views.json), and the result adds `views_sha256`, the
+    digest of views.json."""
+    from common.metrics.image import mean_scores, score_pairs, view_scores
 
     dataset = scene_dir if isinstance(scene_dir, SceneDataset) else SceneDataset(scene_dir)
     if model.meta.scene and model.meta.scene != dataset.scene.name:
@@ -158,4 +160,15 @@ def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, spli
         model = model.to(device)
     pairs = checked_pairs(method, method.scorer(dataset, cfg).eval_pairs(model, records, backend), records,
                           f"the {split} views of {dataset.dir}")
-    return score_pairs(pairs, lpips_net=lpips_net, masks=masks if any(m is not None for m in masks) else None)
+    masks = masks if any(m is not None for m in masks) else None
+    if views_out is None:
+        return score_pairs(pairs, lpips_net=lpips_net, masks=masks)
+    from recon.view_record import quantized, write_views
+
+    preds = [quantized(p) for p, _ in pairs]
+    views = view_scores([(p, gt) for p, (_, gt) in zip(preds, pairs)], lpips_net, masks)
+    means = mean_scores(views)
+    digest = write_views(Path(views_out), [r.stem for r in records], preds, views, means,
+                         {"scene": dataset.scene.name, "split": split, "lpips_net": lpips_net,
+                          "method": model.meta.method, "iteration": model.meta.iteration})
+    return {**means, "views_sha256": digest}

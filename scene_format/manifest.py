@@ -64,3 +64,34 @@ class SceneManifest:
         """Events per second per camera, the mean over cameras (0 where none were counted)."""
         rates = self.events_per_second_per_camera or (0,)
         return sum(rates) / len(rates)
+
+
+# Files a scene folder may gain after generation that no method trains on: dynamic-region masks
+# (`e4dgs masks`) are a scoring aid, so adding them does not make the scene another dataset.
+NOT_TRAINED_ON = ("dynamic/",)
+
+
+def content_digest(manifest: dict[str, Any]) -> str:
+    """SHA-256 of what a scene folder holds: every file's digest (the manifest's `files`, masks left
+    out: NOT_TRAINED_ON), the format version, the scene config's digest and the generation seed; not
+    when or how fast it was generated. Two folders with the same digest train the same model."""
+    import hashlib
+    import json
+
+    files = {k: v for k, v in (manifest.get("files") or {}).items() if not k.startswith(NOT_TRAINED_ON)}
+    payload = {"files": files, **{k: manifest.get(k) for k in ("format_version", "config_sha256", "seed")}}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def folder_digest(scene_dir: Path) -> str:
+    """content_digest of a scene folder's manifest.json; "absent" where the folder has none yet (not
+    generated), "unreadable" where it is not a JSON manifest."""
+    import json
+
+    path = Path(scene_dir) / "manifest.json"
+    try:
+        return content_digest(json.loads(path.read_bytes()))
+    except FileNotFoundError:
+        return "absent"
+    except (ValueError, AttributeError):
+        return "unreadable"

@@ -60,6 +60,56 @@ def luma(image: np.ndarray) -> np.ndarray:
     return image
 
 
+def view_scores(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str | None = "vgg",
+                masks: list[np.ndarray | None] | None = None) -> list[dict[str, float]]:
+    """Per (prediction, ground truth) pair: psnr (capped at 100 dB), psnr_luma, ssim (/ lpips), and
+    where its mask (a dynamic-region mask [H, W] bool, or None) has pixels, the same over them
+    (psnr_dyn, psnr_luma_dyn, ssim_dyn unless the mask lies within the SSIM border, lpips_dyn) and
+    dyn_fraction (the masked share of its pixels; 0 without mask)."""
+    pairs = list(pairs)
+    if not pairs:
+        raise ValueError("score_pairs: no image pairs")
+    masks = list(masks) if masks is not None else [None] * len(pairs)
+    if len(masks) != len(pairs):
+        raise ValueError(f"score_pairs: {len(masks)} masks for {len(pairs)} pairs")
+    out = []
+    for (p, r), m in zip(pairs, masks):
+        m = m if m is not None and m.any() else None
+        whole, region = ssim_with_region(p, r, m)
+        v = {"psnr": min(psnr(p, r), 100.0), "psnr_luma": min(psnr(luma(p), luma(r)), 100.0), "ssim": whole,
+             "dyn_fraction": float(m.mean()) if m is not None else 0.0}
+        if m is not None:
+            v.update(psnr_dyn=psnr_region(p, r, m), psnr_luma_dyn=psnr_region(luma(p), luma(r), m))
+            if region is not None:
+                v["ssim_dyn"] = region
+        if lpips_net:
+            from common.metrics.lpips import lpips_with_region
+            v["lpips"], region_lpips = lpips_with_region(p, r, lpips_net, m)
+            if m is not None and region_lpips is not None:
+                v["lpips_dyn"] = region_lpips
+        out.append({k: float(x) for k, x in v.items()})
+    return out
+
+
+def mean_scores(views: list[dict[str, float]]) -> dict[str, float]:
+    """The scores of a set of views from their view_scores: means over every view (psnr, psnr_luma,
+    ssim, lpips, n_images) and, where some views have a dynamic region, means over those
+    (psnr_dyn, psnr_luma_dyn, ssim_dyn, lpips_dyn, n_dyn_images) and dyn_fraction over every view."""
+    out = {k: float(np.mean([v[k] for v in views])) for k in ("psnr", "psnr_luma", "ssim", "lpips") if k in views[0]}
+    out["n_images"] = len(views)
+    dyn = [v for v in views if "psnr_dyn" in v]
+    if dyn:
+        out.update(psnr_dyn=float(np.mean([v["psnr_dyn"] for v in dyn])),
+                   psnr_luma_dyn=float(np.mean([v["psnr_luma_dyn"] for v in dyn])),
+                   n_dyn_images=len(dyn), dyn_fraction=float(np.mean([v["dyn_fraction"] for v in views])))
+        for k in ("ssim_dyn", "lpips_dyn"):               # masks within the border have no region SSIM
+            vals = [v[k] for v in dyn if k in v]
+            if vals:
+                out[k] = float(np.mean(vals))
+    assert all(math.isfinite(v) for v in out.values())
+    return out
+
+
 def score_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str | None = "vgg",
                 masks: list[np.ndarray | None] | None = None) -> dict[str, float]:
     """Mean PSNR / SSIM (/ LPIPS) over (prediction, ground truth) pairs; inf PSNRs are capped at 100 dB.
@@ -69,32 +119,4 @@ def score_pairs(pairs: Iterable[tuple[np.ndarray, np.ndarray]], lpips_net: str |
     With `masks` (a dynamic-region mask [H, W] bool, or None, per pair) the same scores over the masked
     pixels are added as psnr_dyn / psnr_luma_dyn / ssim_dyn (/ lpips_dyn): means over the views whose
     mask has pixels (`n_dyn_images`), and `dyn_fraction`, the masked share of all pixels."""
-    pairs = list(pairs)
-    if not pairs:
-        raise ValueError("score_pairs: no image pairs")
-    masks = list(masks) if masks is not None else [None] * len(pairs)
-    if len(masks) != len(pairs):
-        raise ValueError(f"score_pairs: {len(masks)} masks for {len(pairs)} pairs")
-    masks = [m if m is not None and m.any() else None for m in masks]
-    ssims = [ssim_with_region(p, r, m) for (p, r), m in zip(pairs, masks)]
-    out = {"psnr": float(np.mean([min(psnr(p, r), 100.0) for p, r in pairs])),
-           "psnr_luma": float(np.mean([min(psnr(luma(p), luma(r)), 100.0) for p, r in pairs])),
-           "ssim": float(np.mean([s for s, _ in ssims])),
-           "n_images": len(pairs)}
-    dyn = [(p, r, m) for (p, r), m in zip(pairs, masks) if m is not None]
-    if dyn:
-        out.update(psnr_dyn=float(np.mean([psnr_region(p, r, m) for p, r, m in dyn])),
-                   psnr_luma_dyn=float(np.mean([psnr_region(luma(p), luma(r), m) for p, r, m in dyn])),
-                   n_dyn_images=len(dyn),
-                   dyn_fraction=float(np.mean([m.mean() if m is not None else 0.0 for m in masks])))
-        region_ssims = [d for _, d in ssims if d is not None]      # masks within the border have none
-        if region_ssims:
-            out["ssim_dyn"] = float(np.mean(region_ssims))
-    if lpips_net:
-        from common.metrics.lpips import lpips_with_region
-        both = [lpips_with_region(p, r, lpips_net, m) for (p, r), m in zip(pairs, masks)]
-        out["lpips"] = float(np.mean([w for w, _ in both]))
-        if dyn:
-            out["lpips_dyn"] = float(np.mean([d for _, d in both if d is not None]))
-    assert all(math.isfinite(v) for v in out.values())
-    return out
+    return mean_scores(view_scores(pairs, lpips_net, masks))

@@ -463,7 +463,8 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
     rows = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "runs", studies=("main",), progress=False,
                      log=lambda s: None)
     assert [r["cell"] for r in rows] == ["d3dgs_sharp"]
-    assert counts == {"resolve_config": 1, "SceneDataset": 1, "config_hash": 1, "manifest.json": 1,
+    # manifest.json twice: the job's identity digests the scene's content before it trains, then the scene opens
+    assert counts == {"resolve_config": 1, "SceneDataset": 1, "config_hash": 1, "manifest.json": 2,
                       "scene.yaml": 1, "cameras.json": 1}, counts
 
 

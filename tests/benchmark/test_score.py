@@ -48,8 +48,9 @@ def test_bundled_renders_scored_from_a_folder_equal_the_benchmark_row(benched, m
     n = render_test_views(load(out / row["run_dir"]), motion_scene, renders / motion_scene.name, "exr")
     assert n == row["n_test_images"]
     (ext,) = score_renders(motion_scene.parent, renders, f"outside_{cell}", inputs, lpips_net="alex", log=lambda s: None)
+    # the row scores the 16-bit views it keeps (recon.view_record), these the float EXRs: 1/65535 apart
     for k in ("psnr", "psnr_luma", "ssim", "lpips", "psnr_dyn", "ssim_dyn", "lpips_dyn"):
-        assert ext[k] == pytest.approx(row[k], abs=1e-6), k
+        assert ext[k] == pytest.approx(row[k], abs=1e-4), k
     assert ext["external"] and ext["inputs"] == row["inputs"] and ext["scene"] == row["scene"]
 
 

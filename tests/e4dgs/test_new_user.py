@@ -382,7 +382,7 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
 
     cfg = build_config(BenchConfig, {"scenes": ["s"], "cells": {"a": CellSpec("d3dgs", overrides={"train.nosuch": 1})}})
     with pytest.raises(ConfigError) as info:
-        resolve_job(next(j for j in jobs(cfg)))
+        next(j for j in jobs(cfg)).method_config
     assert "the preset's overrides of this job" in str(info.value) and "--set" not in str(info.value)
 
 
@@ -602,7 +602,7 @@ def test_shipped_configs_leave_densification_room_above_their_initial_points():
     for preset in sorted((repo / "configs" / "bench").glob("*.yaml")):
         for job in (j for j in jobs(load_bench(preset)) if j.study == "main"):    # every cell on every scene
             kind = read_scene_config(scene_yaml_path(job.scene)).kind
-            t = resolve_job(job).train
+            t = job.method_config.train
             n0 = t.init.n_points_room if kind == "room" else t.init.n_points_object
             assert t.densify.max_gaussians > n0, (preset.name, job.scene, job.cell, t.densify.max_gaussians, n0)
             checked.add(kind)

@@ -146,7 +146,7 @@ def config_classes() -> list[type]:
 NUMBER_TYPES = (int, float, typing.Optional[int], typing.Optional[float], int | None, float | None)
 FIELDS = [(cls, f.name, typing.get_type_hints(cls)[f.name]) for cls in config_classes() for f in dataclasses.fields(cls)
           if f.init and typing.get_type_hints(cls)[f.name] in NUMBER_TYPES]
-REQUIRED = {"SceneConfig": {"name": "x", "kind": "object"}}
+REQUIRED = {"SceneConfig": {"name": "x", "kind": "object"}, "BenchConfig": {"cells": {"a": {"method": "d3dgs"}}}}
 
 
 def test_every_numeric_config_field_has_a_range():

@@ -201,7 +201,8 @@ def test_a_failing_plugin_costs_only_its_own_cells_in_a_bench(motion_scene, tmp_
     preset = tmp_path / "mine.yaml"          # the preset the rows were made with (the tables keep only its rows)
     preset.write_text(yaml.safe_dump(dump(cfg)))
     args = argparse.Namespace(preset=str(preset), ablation_seeds=None, out=tmp_path / "runs", data=motion_scene.parent,
-                              scenes=None, methods=None, report=True, studies=["main"], no_progress=True)
+                              scenes=None, methods=None, report=True, studies=["main"], no_progress=True,
+                              seeds=None, reuse_older=False)
     assert run_bench_cli(args) == 1
     assert f"main/{motion_scene.name}/broken" in capsys.readouterr().err
 
