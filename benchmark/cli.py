@@ -123,6 +123,44 @@ def run_score(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_verify_parser(sub) -> None:
+    p = sub.add_parser("verify", help="recompute a results folder's scores from its kept renders and check them",
+                       description="For every row of <results>/results.jsonl: checks the SHA-256 of its per-view file "
+                                   "and of every scored render, recomputes each view's PSNR / SSIM / LPIPS (and the "
+                                   "dynamic-region ones) from the render and the scene's ground truth, and the row's "
+                                   "means from them; names the first view that does not match. Exit 1 on a mismatch.")
+    p.add_argument("results", type=Path, help="a results folder (runs/quick)")
+    p.add_argument("--data", type=Path, default=None,
+                   help="the dataset root (default data/<dataset> of the preset in <results>/bench.json)")
+    p.add_argument("--keys", type=name_list, default=None, help="comma-separated row keys (default: every row)")
+    p.add_argument("--no-lpips", action="store_true", help="check LPIPS by the digests only (skips the network)")
+    p.set_defaults(func=run_verify)
+
+
+def run_verify(args: argparse.Namespace) -> int:
+    import json
+
+    from benchmark.verify import verify_results
+
+    if not (args.results / "results.jsonl").is_file():
+        raise SystemExit(f"error: {args.results}: no results.jsonl (a results folder of `e4dgs bench`)")
+    data = args.data
+    if data is None:
+        bench = args.results / "bench.json"
+        dataset = json.loads(bench.read_text()).get("dataset") if bench.is_file() else None
+        if not dataset:
+            raise SystemExit(f"error: {args.results}: no bench.json naming its dataset; give --data")
+        data = Path("data") / dataset
+    try:
+        verdicts = verify_results(args.results, data, args.keys, lpips=not args.no_lpips)
+    except ValueError as exc:
+        raise SystemExit(f"error: {exc}") from None
+    counts = {s: sum(v.status == s for v in verdicts) for s in ("ok", "mismatch", "unverifiable")}
+    print(f"verify: {counts['ok']} row(s) match their renders, {counts['mismatch']} do not, "
+          f"{counts['unverifiable']} cannot be verified")
+    return 1 if counts["mismatch"] else 0
+
+
 def tabled_rows(cfg, rows: list[dict], out: Path, data_root: Path | None = None, reuse_older: bool = False) -> list[dict]:
     """The rows the tables show: the preset's current ones (benchmark.config.current_rows; with
     `reuse_older` also those of another code version or dataset, marked), saying how many rows

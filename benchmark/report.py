@@ -1,7 +1,9 @@
 """Tables and plots from results.jsonl (`e4dgs bench --report` regenerates them without training).
 
 leaderboard.md/.csv/.json  the paper's Table 1 layout: per scene PSNR / SSIM / LPIPS, their average and
-                        the training time; best in bold, second best underlined (per column)
+                        the training time; best in bold, second best underlined (per column), where
+                        the difference exceeds the seed spread (benchmark.ties), else marked as a tie;
+                        a cell trained at several seeds shows mean ± sd over them
 accuracy_vs_time.png/.md  test PSNR against training wall-clock seconds at each snapshot
 blur.md                 the blur-robustness study (events-only methods never see RGB: one value for all levels)
 ablation.md             E-4DGS with each component switched off (the paper's Table 2 layout)
@@ -17,6 +19,7 @@ from pathlib import Path
 
 from benchmark.rows import cell_order, describe_rows, labels_of, sees_rgb
 from benchmark.speed_report import SpeedRoles, plot_speed, speed_tables
+from benchmark.ties import average_error, mean_sd, combine_seeds, pooled_spread, rank_with_ties, standard_error
 from common.fileio import atomic_output, write_text_atomic
 
 METRICS = (("psnr", "PSNR↑", True), ("ssim", "SSIM↑", True), ("lpips", "LPIPS↓", False))
@@ -28,28 +31,69 @@ def _fmt(key: str, v: float | None) -> str:
     return f"{v:.2f}" if key == "psnr" else f"{v:.3f}"
 
 
-def _rank_marks(values: dict[str, float | None], higher: bool) -> dict[str, str]:
-    """cell -> '**' (best), '<u>' (second) or '' for one column."""
-    valid = sorted((v, c) for c, v in values.items() if v is not None)
-    order = [c for v, c in (reversed(valid) if higher else valid)]
-    return {c: ("best" if i == 0 else "second" if i == 1 else "") for i, c in enumerate(order)}
-
-
 def _mark(text: str, rank: str) -> str:
-    return f"**{text}**" if rank == "best" else f"<u>{text}</u>" if rank == "second" else text
+    """A value with its rank: best **bold**, second <u>underlined</u>; a tie (rank ending in "=") also ≈."""
+    tie = "≈" if rank.endswith("=") else ""
+    rank = rank.rstrip("=")
+    return f"**{text}{tie}**" if rank == "best" else f"<u>{text}{tie}</u>" if rank == "second" else text
 
 
 def main_table(rows: list[dict]) -> tuple[list[str], dict[str, dict[str, dict]]]:
-    """(scenes in order, cell -> scene -> row) of the main study."""
-    table: dict[str, dict[str, dict]] = defaultdict(dict)
+    """(scenes in order, cell -> scene -> row) of the main study; a cell trained at several seeds is
+    one row of their means (benchmark.ties.combine_seeds: n_seeds, spread)."""
+    groups: dict[str, dict[str, list[dict]]] = defaultdict(lambda: defaultdict(list))
     scenes: list[str] = []
     for r in rows:
         if r["study"] != "main":
             continue
-        table[r["cell"]][r["scene"]] = r
+        groups[r["cell"]][r["scene"]].append(r)
         if r["scene"] not in scenes:
             scenes.append(r["scene"])
+    table: dict[str, dict[str, dict]] = defaultdict(dict)
+    for cell, per_scene in groups.items():
+        for scene, rs in per_scene.items():
+            table[cell][scene] = combine_seeds(rs)
     return scenes, table
+
+
+def kind_spreads(table, preset_spread: dict[str, dict[str, float]] | None) -> tuple[dict, dict[str, str]]:
+    """(cell -> {metric: sd} a one-seed cell is taken to have, cell -> where it comes from): measured
+    over seeds in these rows where a scene has two or more, else the preset's seed_spread."""
+    pooled = pooled_spread(table)
+    out, source = {}, {}
+    for c in table:
+        if c in pooled:
+            out[c], source[c] = pooled[c], "these results"
+        elif (preset_spread or {}).get(c):
+            out[c], source[c] = preset_spread[c], "the preset's seed_spread"
+    return out, source
+
+
+def column_ranks(table, cells: list[str], scenes: list[str], col: tuple[str, str], spreads: dict,
+                 higher: bool) -> dict[str, str]:
+    """Ranks of one column (scene or "average", metric) with ties (benchmark.ties.rank_with_ties)."""
+    scene, key = col
+    values = {}
+    for c in cells:
+        if scene == "average":
+            m = _average(table, c, scenes, key)
+            rows = [table[c].get(s) for s in scenes]
+            se = average_error([standard_error(r, key, spreads.get(c)) for r in rows]) if None not in rows else None
+        else:
+            r = table[c].get(scene)
+            m = r.get(key) if r else None
+            se = standard_error(r, key, spreads.get(c)) if r else None
+        values[c] = (m, se) if m is not None else None
+    return rank_with_ties(values, higher)
+
+
+def _fmt_cell(key: str, row: dict | None, value: float | None) -> str:
+    """A value, with ± its seeds' sd where the cell has several seeds, and † for a row kept from
+    another version (--reuse-older)."""
+    text = _fmt(key, value)
+    if row and row.get("n_seeds", 1) > 1 and key in (row.get("spread") or {}):
+        text += f" ± {_fmt(key, row['spread'][key])}"
+    return text + ("†" if row and row.get("older") else "")
 
 
 def _average(table, cell, scenes, key):
@@ -71,7 +115,8 @@ def failed_section(failed: list[dict]) -> str:
             "logs are in logs/.\n\n| Job | Last error |\n|---|---|\n" + "\n".join(lines) + "\n")
 
 
-def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), order: tuple[str, ...] = ()) -> tuple[str, str]:
+def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), order: tuple[str, ...] = (),
+                seed_spread: dict[str, dict[str, float]] | None = None) -> tuple[str, str]:
     scenes, table = main_table(rows)
     for r in failed:                      # a failed main job still gets its row and column
         if r["study"] == "main" and r["scene"] not in scenes:
@@ -83,7 +128,9 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
     columns = [(s, k) for s in scenes for k, _, _ in METRICS] + [("average", k) for k, _, _ in METRICS]
     values = {col: {c: (_average(table, c, scenes, col[1]) if col[0] == "average"
                         else table[c].get(col[0], {}).get(col[1])) for c in cells} for col in columns}
-    ranks = {col: _rank_marks(values[col], higher=dict((k, h) for k, _, h in METRICS)[col[1]]) for col in columns}
+    spreads, spread_source = kind_spreads(table, seed_spread)
+    ranks = {col: column_ranks(table, cells, scenes, col, spreads, dict((k, h) for k, _, h in METRICS)[col[1]])
+             for col in columns}
     md = io.StringIO()
     if header:
         md.write(header.rstrip() + "\n\n")
@@ -92,7 +139,8 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
     md.write("|---|" + "---|" * (len(columns) + 2) + "\n")
     out_csv = io.StringIO()
     w = csv.writer(out_csv)
-    w.writerow(["method", "label"] + [f"{s}_{k}" for s, k in columns] + ["train_s_per_scene", "gaussians_mean"])
+    w.writerow(["method", "label"] + [f"{s}_{k}" for s, k in columns] + ["train_s_per_scene", "gaussians_mean",
+                                                                         "seeds", "older_version"])
     for c in cells:
         times = [table[c][s].get("wall_s") for s in scenes if s in table[c]]
         gauss = [table[c][s].get("n_gaussians") for s in scenes if s in table[c]]
@@ -100,14 +148,18 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
         g = sum(gauss) / len(gauss) if gauss and None not in gauss else None
         tail = f" | {_fmt_s(t)} | {_fmt_s(g)} |\n"
         md.write(f"| {labels.get(c, c)} | " + " | ".join(
-            "failed" if (c, s) in failed_cells else _mark(_fmt(k, values[(s, k)][c]), ranks[(s, k)].get(c, ""))
-            for s, k in columns) + tail)
+            "failed" if (c, s) in failed_cells
+            else _mark(_fmt_cell(k, table[c].get(s) if s != "average" else None, values[(s, k)][c]),
+                       ranks[(s, k)].get(c, "")) for s, k in columns) + tail)
+        seeds = sorted({r.get("n_seeds", 1) for r in table[c].values()})
+        older = "; ".join(f"{s}: {table[c][s]['older']}" for s in scenes if table[c].get(s, {}).get("older"))
         w.writerow([c, labels.get(c, c)] + [("" if values[col][c] is None else f"{values[col][c]:.4f}") for col in columns]
-                   + ["" if t is None else f"{t:.1f}", "" if g is None else f"{g:.0f}"])
+                   + ["" if t is None else f"{t:.1f}", "" if g is None else f"{g:.0f}", "/".join(map(str, seeds)), older])
     external = [labels[c] for c in cells if any(r.get("external") for r in table[c].values())]
     if external:
         md.write("\nScored from outside renders (`e4dgs score`, their own training): " + ", ".join(external)
                  + "; their train time is what their authors reported.\n")
+    md.write(spread_note(table, cells, scenes, labels, spreads, spread_source))
     md.write("\nBest per column in **bold**, second <u>underlined</u>. PSNR/SSIM/LPIPS are means of per-image "
              "values over each scene's held-out views; methods that see no RGB (events only) are scored "
              "against grayscale ground truth after the log-intensity gain (>= 0) / offset correction, methods that "
@@ -120,8 +172,8 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
     if speeds:
         md.write("Speed variants: " + "; ".join(f"{label} at x{sp:g}" for label, sp in speeds) + " (the same motion "
                  "x times faster; its blurred frames and its events). The others train on the scene at speed 1.\n")
-    md.write(luma_table(scenes, table, cells, labels))
-    md.write(dynamic_table(scenes, table, cells, labels))
+    md.write(luma_table(scenes, table, cells, labels, spreads))
+    md.write(dynamic_table(scenes, table, cells, labels, spreads))
     md.write(floor_table(scenes, table, cells, labels))
     if len(scenes) > 1:
         md.write("\n### Per scene\n\n| Scene | Method | PSNR↑ | SSIM↑ | LPIPS↓ | Iterations | Train (s) | Gaussians |\n"
@@ -135,6 +187,35 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
                              f"{r.get('n_gaussians') or '–'} |\n")
     md.write(failed_section(list(failed)))
     return md.getvalue(), out_csv.getvalue()
+
+
+def spread_note(table, cells: list[str], scenes: list[str], labels: dict[str, str], spreads: dict,
+                source: dict[str, str]) -> str:
+    """What the ranks rest on: seeds per cell, the spread a one-seed cell is taken to have and from
+    where, and which rows come from another version (†)."""
+    out = io.StringIO()
+    n = sorted({r.get("n_seeds", 1) for c in cells for r in table[c].values()})
+    out.write(f"\nSeeds per cell: {', '.join(map(str, n))}; a cell with several shows mean ± sample standard deviation. "
+              "Bold / underline mark a best / second best that differs from the next by more than twice the standard "
+              "error of the difference (the seeds' sd / sqrt(seeds); a one-seed cell takes the seed spread of its "
+              "kind); ≈ marks values that tie (within that margin of the group's best).")
+    missing = [labels.get(c, c) for c in cells if c not in spreads and all(r.get("n_seeds", 1) == 1 for r in table[c].values())]
+    known = [f"{labels.get(c, c)} {spreads[c]['psnr']:.2f} dB ({source[c]})" for c in cells if c in spreads and "psnr" in spreads[c]]
+    if known:
+        out.write(" PSNR seed spread (sd) per cell: " + "; ".join(known) + ".")
+    if missing:
+        out.write(" No seed spread known for " + ", ".join(missing) + ": their ranks are plain orderings.")
+    older: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))    # note -> scene -> cells
+    for c in cells:
+        for s in scenes:
+            if table[c].get(s, {}).get("older"):
+                older[table[c][s]["older"]][s].append(labels.get(c, c))
+    if older:
+        parts = [f"{note}: " + ", ".join(f"{s} ({'every cell' if len(cs) == len(cells) else ', '.join(cs)})"
+                                         for s, cs in per.items()) for note, per in older.items()]
+        out.write("\n\n† Kept from another version with `--reuse-older`, not trained by the code and data as they "
+                  "are now: " + "; ".join(parts) + ".")
+    return out.getvalue() + "\n"
 
 
 def _fmt_s(v: float | None) -> str:
@@ -162,7 +243,7 @@ def floor_table(scenes: list[str], table, cells: list[str], labels: dict[str, st
     return md.getvalue()
 
 
-def dynamic_table(scenes: list[str], table, cells: list[str], labels: dict[str, str]) -> str:
+def dynamic_table(scenes: list[str], table, cells: list[str], labels: dict[str, str], spreads: dict | None = None) -> str:
     """PSNR over the moving pixels (the scenes' dynamic masks) next to the whole image's, per scene and on
     average, with SSIM and LPIPS over the same pixels on average; ranks on the region's columns."""
     if not any(table[c].get(s, {}).get("psnr_dyn") is not None for c in cells for s in scenes):
@@ -170,7 +251,7 @@ def dynamic_table(scenes: list[str], table, cells: list[str], labels: dict[str, 
     cols = [(s, "psnr_dyn") for s in scenes] + [("average", k) for k in ("psnr_dyn", "ssim_dyn", "lpips_dyn")]
     values = {col: {c: (_average(table, c, scenes, col[1]) if col[0] == "average" else table[c].get(col[0], {}).get(col[1]))
                     for c in cells} for col in cols}
-    ranks = {col: _rank_marks(values[col], higher=col[1] != "lpips_dyn") for col in cols}
+    ranks = {col: column_ranks(table, cells, scenes, col, spreads or {}, higher=col[1] != "lpips_dyn") for col in cols}
     md = io.StringIO()
     md.write("\n### Dynamic region: the pixels that move\n\n| Method | "
              + " | ".join(f"{s} PSNR (whole)" for s in scenes)
@@ -192,13 +273,13 @@ def dynamic_table(scenes: list[str], table, cells: list[str], labels: dict[str, 
     return md.getvalue()
 
 
-def luma_table(scenes: list[str], table, cells: list[str], labels: dict[str, str]) -> str:
+def luma_table(scenes: list[str], table, cells: list[str], labels: dict[str, str], spreads: dict | None = None) -> str:
     """PSNR of every method on one target, the luma the events-only methods are scored on (a colour
     prediction's luma against the truth's, after the method's own correction): the main table
     scores colour methods on RGB, a harder target, so its columns mix two quantities."""
     values = {s: {c: table[c][s].get("psnr_luma") if s in table[c] else None for c in cells} for s in scenes}
     values["average"] = {c: _average(table, c, scenes, "psnr_luma") for c in cells}
-    ranks = {col: _rank_marks(values[col], higher=True) for col in values}
+    ranks = {col: column_ranks(table, cells, scenes, (col, "psnr_luma"), spreads or {}, higher=True) for col in values}
     md = io.StringIO()
     md.write("\n### The same target for every method: PSNR of the luma\n\n| Method | "
              + " | ".join(scenes + ["Average"]) + " |\n|---|" + "---|" * (len(scenes) + 1) + "\n")
@@ -283,7 +364,7 @@ def blur_table(rows: list[dict], levels=("mild", "medium", "strong"), order: tup
         vals = []
         for lv in levels:
             r = by.get((c, lv)) or (main.get(c) if c in main and not sees_rgb(main[c]) and not as_speed else None)
-            vals += [_fmt(k, r[k] if r else None) for k, _, _ in METRICS]
+            vals += [_fmt_cell(k, r, r.get(k) if r else None) for k, _, _ in METRICS]
         md.write(f"| {labels.get(c, c)} | " + " | ".join(vals) + " |\n")
     if as_speed:
         md.write("\nEach level is a motion speed: every method, events-only ones included, trains on that speed variant "
@@ -304,13 +385,6 @@ def blur_levels(rows: list[dict], cfg=None) -> tuple[str, ...]:
     return tuple(known + [lv for lv in dict.fromkeys(held) if lv not in known]) or ("mild", "medium", "strong")
 
 
-def _mean_spread(values: list[float]) -> tuple[float, float]:
-    """(mean, sample standard deviation; 0 for one value)."""
-    m = sum(values) / len(values)
-    sd = math.sqrt(sum((v - m) ** 2 for v in values) / (len(values) - 1)) if len(values) > 1 else 0.0
-    return m, sd
-
-
 def ablation_table(rows: list[dict]) -> str:
     abl = [r for r in rows if r["study"] == "ablation"]
     if not abl:
@@ -325,19 +399,20 @@ def ablation_table(rows: list[dict]) -> str:
     md.write(f"Ablation of {abl[0].get('label') or abl[0]['cell']} on **{scene}**, {len(seeds) or 1} training seed(s) per "
              "variant: mean ± sample standard deviation over the seeds; Δ PSNR against the full method.\n\n"
              "| Variant | Seeds | PSNR↑ | Δ PSNR | SSIM↑ | LPIPS↓ | Gaussians | Train (s) |\n|---|---|---|---|---|---|---|---|\n")
-    full_psnr = _mean_spread([r["psnr"] for r in full])[0] if full else None
+    full_psnr = mean_sd([r["psnr"] for r in full])[0] if full else None
     order = (["full"] if full else []) + [v for v in variants if v != "full"]
     for name in order:
         rs = variants[name]
         cols = []
         for k in ("psnr", "ssim", "lpips"):
-            m, sd = _mean_spread([r[k] for r in rs])
+            m, sd = mean_sd([r[k] for r in rs])
             cols.append(f"{_fmt(k, m)} ± {_fmt(k, sd)}" if len(rs) > 1 else _fmt(k, m))
-        p = _mean_spread([r["psnr"] for r in rs])[0]
+        p = mean_sd([r["psnr"] for r in rs])[0]
         delta = "–" if full_psnr is None or name == "full" else f"{p - full_psnr:+.2f}"
-        n_g = _mean_spread([r["n_gaussians"] for r in rs])[0]
-        t = _mean_spread([r["wall_s"] for r in rs])[0]
-        md.write(f"| {name} | {len(rs)} | {cols[0]} | {delta} | {cols[1]} | {cols[2]} | {n_g:.0f} | {t:.0f} |\n")
+        n_g = mean_sd([r["n_gaussians"] for r in rs])[0]
+        t = mean_sd([r["wall_s"] for r in rs])[0]
+        mark = "†" if any(r.get("older") for r in rs) else ""
+        md.write(f"| {name}{mark} | {len(rs)} | {cols[0]} | {delta} | {cols[1]} | {cols[2]} | {n_g:.0f} | {t:.0f} |\n")
     return md.getvalue()
 
 
@@ -367,7 +442,7 @@ def write_report(rows: list[dict], out_root: Path, header: str = "", cfg=None) -
     roles = SpeedRoles(cfg.speed.reference, cfg.speed.rgb_reference) if cfg is not None else SpeedRoles()
     failed = [r for r in rows if is_failed(r)]
     rows = [r for r in rows if not is_failed(r)]
-    md, table_csv = leaderboard(rows, header, failed, order)
+    md, table_csv = leaderboard(rows, header, failed, order, cfg.seed_spread if cfg is not None else None)
     written = []
     for name, text in (("leaderboard.md", md), ("leaderboard.csv", table_csv),
                        ("leaderboard.json", leaderboard_json(rows, order)), ("accuracy_vs_time.md", accuracy_vs_time(rows)),

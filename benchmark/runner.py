@@ -69,7 +69,7 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     done = {(r["key"], r["config_hash"]) for r in rows
             if r.get("status") != "failed" and (r["key"] not in by_key or complete_row(r, by_key[r["key"]], cfg, data_root))}
     older = {r["key"]: older_note(r, by_key[r["key"]]) for r in rows if r.get("key") in by_key
-             and (r["key"], r.get("config_hash")) not in done and r.get("status") != "failed"}
+             and r.get("config_hash") != by_key[r["key"]].config_hash() and r.get("status") != "failed"}
     kept_older = {k: n for k, n in older.items() if reuse_older and n and n != "config"
                   and complete_row(next(r for r in rows if r["key"] == k), by_key[k], cfg, data_root)}
     if cfg.description:

@@ -17,7 +17,7 @@ from common.config import ConfigWarning
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from benchmark.cli import add_bench_parser, add_score_parser, add_testviews_parser
+    from benchmark.cli import add_bench_parser, add_score_parser, add_testviews_parser, add_verify_parser
     from datagen.cli import add_check_parser, add_dataset_parser, add_masks_parser
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
     from recon.cli import add_render_parser, add_train_parser
@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_parser(sub)
     add_testviews_parser(sub)
     add_score_parser(sub)
+    add_verify_parser(sub)
     add_viewer_parser(sub)
     return parser
 
