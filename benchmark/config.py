@@ -224,11 +224,9 @@ class Job:
     def method_config(self):
         """The typed config it trains with: its config file, then its overrides, resolved once per job
         (every field, after defaults, as the trainer sees it). ConfigError names the job."""
-        from recon.api import resolve_config
-
         try:
-            return resolve_config(self.method, str(REPO / self.config) if self.config else None, self.overrides,
-                                  "the preset's overrides of this job (cells, studies, scene_overrides)")
+            return _resolved(self.method, self.config, json.dumps(self.overrides, sort_keys=True, default=str),
+                             _file_stamp(REPO / self.config) if self.config else None)
         except (ConfigError, ValueError) as exc:
             raise ConfigError(f"bench job {self.key} ({self.method}, {self.config or 'defaults'}): {exc}") from None
 
@@ -275,6 +273,26 @@ class Job:
     @functools.cached_property
     def _config_hash(self) -> str:
         return _sha(self.identity_parts)
+
+
+@functools.lru_cache(maxsize=4096)
+def _resolved(method: str, config: str, overrides_json: str, stamp):
+    """A method's config file plus overrides, resolved once per process for each distinct (method,
+    file as it is on disk, overrides): the jobs of a bench, and the grid its tables are checked
+    against, share one resolution (the file read once per distinct job)."""
+    from recon.api import resolve_config
+
+    return resolve_config(method, str(REPO / config) if config else None, json.loads(overrides_json),
+                          "the preset's overrides of this job (cells, studies, scene_overrides)")
+
+
+def _file_stamp(path: Path):
+    """(mtime_ns, size) of a file, None where it is missing: a file edited in place resolves again."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_mtime_ns, st.st_size
 
 
 def _sha(obj: Any) -> str:

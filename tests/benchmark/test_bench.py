@@ -417,8 +417,9 @@ def test_bench_help_lists_every_shipped_preset(capsys):
     assert "quick | paper | paper_gpu | tiny, or a bench YAML file" in text
 
 
+@pytest.mark.parametrize("cell", ["d3dgs_sharp", "e2vid_d3dgs"])
 def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its_log_back(motion_scene, tmp_path,
-                                                                                         monkeypatch):
+                                                                                         monkeypatch, cell):
     """One bench job's reads, counted by patching the readers (before this was tidied: the config
     resolved 5 times, the scene opened twice, manifest.json read 3 times, log.jsonl read back once and
     the job's config hash computed 8 times)."""
@@ -430,12 +431,16 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
     import scene_format.reader as reader
     from benchmark.config import Job
 
+    from benchmark.config import _resolved
+
+    _resolved.cache_clear()                  # configs resolved by earlier tests of this process
     counts = collections.Counter()
     real_open, real_resolve, real_init = builtins.open, api.resolve_config, reader.SceneDataset.__init__
     real_hash = Job._config_hash.func
 
     def counting_open(file, mode="r", *a, **k):
-        if "r" in mode and str(file).endswith(("manifest.json", "log.jsonl", "scene.yaml", "cameras.json")):
+        if "r" in mode and str(file).endswith(("manifest.json", "log.jsonl", "scene.yaml", "cameras.json",
+                                               "_quick.yaml")):
             counts[Path(str(file)).name] += 1
         return real_open(file, mode, *a, **k)
 
@@ -458,14 +463,21 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
     cached = functools.cached_property(hashed)
     cached.__set_name__(Job, "_config_hash")
     monkeypatch.setattr(Job, "_config_hash", cached)
-    cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name], "cells": {
-        "d3dgs_sharp": CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "sharp"})}})
+    spec = (CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "sharp"}) if cell == "d3dgs_sharp" else
+            CellSpec("e2vid_d3dgs", config="configs/recon/bench/e2vid_d3dgs_quick.yaml",
+                     overrides={**TINY_TRAIN, "train.coarse_to_fine.factors": [], "train.coarse_to_fine.until": []}))
+    cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name], "cells": {cell: spec}})
     rows = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "runs", studies=("main",), progress=False,
                      log=lambda s: None)
-    assert [r["cell"] for r in rows] == ["d3dgs_sharp"]
-    # manifest.json twice: the job's identity digests the scene's content before it trains, then the scene opens
+    assert [r["cell"] for r in rows] == [cell] and rows[0].get("status") != "failed", rows[0].get("error")
+    # manifest.json twice: the job's identity digests the scene's content before it trains, then the scene opens;
+    # the recipe file (E2VID + D3DGS's) once, where its config is resolved
+    recipe = {"e2vid_d3dgs_quick.yaml": 1} if cell == "e2vid_d3dgs" else {}
     assert counts == {"resolve_config": 1, "SceneDataset": 1, "config_hash": 1, "manifest.json": 2,
-                      "scene.yaml": 1, "cameras.json": 1}, counts
+                      "scene.yaml": 1, "cameras.json": 1, **recipe}, counts
+    counts.clear()                       # the report step reads rows, not recipe files or scenes
+    write_report(rows, tmp_path / "tables", "", cfg)
+    assert counts == {}, counts
 
 
 def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():

@@ -14,24 +14,61 @@ def test_ssim_identity_and_bounds():
     assert photometric_loss(a, a).item() == pytest.approx(0.0, abs=1e-12)
 
 
-def test_ssim_matches_scikit_image_away_from_the_borders():
+def _ssim_against_scikit_image(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(our `ssim` of two images [H, W, C], what scikit-image's structural_similarity (Gaussian window,
+    sigma 1.5, population covariance, data range 1) implies for it). The images agree in their outer
+    10 px, so our zero-padded border windows see equal images (SSIM 1 there) and every pixel inside
+    the 5 px band is one whose window scikit-image also averages: ours = (1 - f) + f x skimage's,
+    f the share of the inner pixels."""
     from skimage.metrics import structural_similarity
 
-    g = torch.Generator().manual_seed(1)
-    a = torch.rand(48, 48, 1, generator=g, dtype=torch.float64)
-    b = (a + 0.1 * torch.randn(48, 48, 1, generator=g, dtype=torch.float64)).clamp(0, 1)
-    _, full = structural_similarity(a[..., 0].numpy(), b[..., 0].numpy(), gaussian_weights=True, sigma=1.5,
-                                    use_sample_covariance=False, data_range=1.0, full=True)
-    from recon.losses import C1, C2, _window
-    import torch.nn.functional as F
-    # ours, per pixel, on the interior where zero padding plays no part
-    x, y = a.permute(2, 0, 1)[None], b.permute(2, 0, 1)[None]
-    w = _window(11, 1.5, 1, torch.float64, "cpu")
-    mu_x, mu_y = F.conv2d(x, w), F.conv2d(y, w)
-    sxx, syy = F.conv2d(x * x, w) - mu_x ** 2, F.conv2d(y * y, w) - mu_y ** 2
-    sxy = F.conv2d(x * y, w) - mu_x * mu_y
-    ours = ((2 * mu_x * mu_y + C1) * (2 * sxy + C2)) / ((mu_x ** 2 + mu_y ** 2 + C1) * (sxx + syy + C2))
-    np.testing.assert_allclose(ours[0, 0].numpy(), full[5:-5, 5:-5], atol=1e-6)
+    ours = ssim(torch.from_numpy(a), torch.from_numpy(b)).item()
+    sk = structural_similarity(a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1.0,
+                               channel_axis=-1)
+    h, w = a.shape[:2]
+    f = (h - 10) * (w - 10) / (h * w)
+    return ours, (1 - f) + f * sk
+
+
+def _real_pair(motion_scene, channels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two real frames of the tiny scene (one camera, a quarter of the clip apart), equal in a 10 px band."""
+    from scene_format.reader import SceneDataset
+
+    ds = SceneDataset(motion_scene)
+    recs = [r for r in ds.frames("train") if r.camera == 0]
+    a, b = (ds.load_image(r.path).astype(np.float64) for r in (recs[0], recs[len(recs) // 4]))
+    if channels == 1:
+        a, b = a.mean(-1, keepdims=True), b.mean(-1, keepdims=True)
+    b[:10], b[-10:], b[:, :10], b[:, -10:] = a[:10], a[-10:], a[:, :10], a[:, -10:]
+    return a, b
+
+
+@pytest.mark.parametrize("channels", [3, 1])
+def test_ssim_equals_scikit_images_structural_similarity_on_real_frames(motion_scene, channels):
+    a, b = _real_pair(motion_scene, channels)
+    ours, theirs = _ssim_against_scikit_image(a, b)
+    assert 0.3 < theirs < 0.999                   # the frames differ: the comparison means something
+    assert ours == pytest.approx(theirs, abs=1e-9)
+
+
+def test_the_scikit_image_check_fails_on_a_mutated_ssim_map(motion_scene, monkeypatch):
+    """The check above catches a wrong SSIM map (the constant C2 taken as 0.03 instead of 0.03 ** 2),
+    though `ssim` and `ssim_ref` then still agree with each other."""
+    import recon.losses as losses
+
+    a, b = _real_pair(motion_scene, 3)
+    real = losses._ssim_map
+
+    def mutated(mu_x, mu_y, exx, eyy, exy):
+        sxx, syy, sxy = exx - mu_x ** 2, eyy - mu_y ** 2, exy - mu_x * mu_y
+        return ((2 * mu_x * mu_y + losses.C1) * (2 * sxy + 0.03)) / ((mu_x ** 2 + mu_y ** 2 + losses.C1) * (sxx + syy + 0.03))
+
+    monkeypatch.setattr(losses, "_ssim_map", mutated)
+    ours, theirs = _ssim_against_scikit_image(a, b)
+    assert abs(ours - theirs) > 1e-3
+    ta, tb = torch.from_numpy(a), torch.from_numpy(b)
+    assert ssim(ta, tb).item() == pytest.approx(ssim_ref(ta, tb).item(), abs=1e-12)     # the shared map hides it
+    monkeypatch.setattr(losses, "_ssim_map", real)
 
 
 def test_losses_are_differentiable_and_known():
