@@ -90,10 +90,11 @@ def trained(motion_scene, tmp_path_factory):
     return out
 
 
-def _wait(pred, timeout_s=90.0):
+def _wait(pred, timeout_s=90.0, what="the viewer did not answer in time"):
+    """Wait for a condition (never for a guessed time): poll `pred` until it holds, failing after timeout_s."""
     t0 = time.monotonic()
     while not pred():
-        assert time.monotonic() - t0 < timeout_s, "the viewer did not answer in time"
+        assert time.monotonic() - t0 < timeout_s, what
         time.sleep(0.05)
 
 
@@ -130,14 +131,18 @@ def test_a_headless_browser_sees_the_model_render_at_a_dataset_camera_and_time(t
         text = browser.evaluate("document.body.innerText")
         assert "sharp, cam1" in text and "events" in text and "ON red, OFF blue" in text
         assert f"{len(other):,} Gaussians" in text                                 # the second run beside it
-        time.sleep(1.0)
-        shot = cv2.imdecode(np.frombuffer(browser.screenshot(), np.uint8), cv2.IMREAD_COLOR)
+        shots = []
+
+        def drawn() -> bool:                                  # the 3D view (left of the GUI panel) not blank
+            shots.append(cv2.imdecode(np.frombuffer(browser.screenshot(), np.uint8), cv2.IMREAD_COLOR))
+            return shots[-1] is not None and shots[-1][:, :600].astype(np.float64).std() > 5.0
+
+        _wait(drawn, what="the browser never drew the render and the cameras")
+        shot = shots[-1]
     finally:
         browser.close()
         viewer.stop()
-    assert shot is not None and shot.shape[1] == 1100 and shot.shape[0] > 400
-    left = shot[:, :600].astype(np.float64)                   # the 3D view (the GUI panel is on the right)
-    assert left.std() > 5.0                                   # not blank: the render and the cameras show
+    assert shot.shape[1] == 1100 and shot.shape[0] > 400
     cv2.imwrite(str(tmp_path / "viewer.png"), shot)
 
 
@@ -213,9 +218,8 @@ def test_the_command_serves_then_stops_on_ctrl_c_leaving_no_process_and_no_file(
             proc.kill()
     assert proc.returncode == 0, err[-2000:]
     assert "viewer: stopped" in out and "Traceback" not in err
-    time.sleep(0.5)
-    alive = [p for p in helpers if Path(f"/proc/{p}").exists()]
-    assert alive == []
+    _wait(lambda: not [p for p in helpers if Path(f"/proc/{p}").exists()], 30.0,
+          f"helper processes still alive: {[p for p in helpers if Path(f'/proc/{p}').exists()]}")
     assert list(work.iterdir()) == [] and list((tmp_path / "tmp").iterdir()) == []
     assert {p for p in motion_scene.rglob("*")} == before
 
