@@ -34,10 +34,11 @@ def versions(*modules: str, **extra: str) -> dict[str, str]:
 
 # The packages whose code computes a benchmark row's numbers (training, rendering, scoring, reading
 # the scene); a change to any of their sources makes every row another code version. Presentation
-# (tables, plots), the command line and the dataset generator are left out: the generator's output is
-# covered by the dataset's own digest (scene_format.manifest.content_digest).
+# (tables, plots), the command line, the grid's bookkeeping (benchmark/config.py: what it composes is
+# the resolved config, its own part of the identity) and the dataset generator are left out: the
+# generator's output is covered by the dataset's own digest (scene_format.manifest.content_digest).
 CODE_PACKAGES = ("common", "e2vid", "recon", "scene_format")
-CODE_MODULES = ("benchmark/config.py", "benchmark/job_run.py", "benchmark/testviews.py")
+CODE_MODULES = ("benchmark/job_run.py", "benchmark/testviews.py")
 
 
 def _source_files(root: Path) -> list[Path]:
