@@ -15,6 +15,9 @@ and backward: `project_ref.project_ref` / `cpu.project_cpu`, `rasterize_ref.rast
 """
 from __future__ import annotations
 
+import functools
+import sys
+
 import torch
 
 from recon.raster.project_ref import project_ref
@@ -33,12 +36,41 @@ def _check(means, quats, scales, opacities, colors, background):
         raise ValueError(f"render: background must have shape ({colors.shape[1]},), got {tuple(background.shape)}")
 
 
+@functools.lru_cache(maxsize=1)
 def gsplat_available() -> bool:
+    """Whether gsplat renders on this machine: importable, a CUDA device, and its kernels run. gsplat
+    imports without its kernels and compiles them on first use; where that fails (no compiler, a CUDA
+    toolkit that does not match torch's) a run that picked it would die at its first step. So one
+    Gaussian is rendered here once; on failure this says why in one line and returns False (`auto`
+    then renders with the torch reference on CUDA)."""
     try:
         import gsplat  # noqa: F401
     except ImportError:
         return False
+    if not torch.cuda.is_available():
+        return False
+    try:
+        _render_one_gaussian_with_gsplat()
+    except Exception as exc:                     # noqa: BLE001 -- any failure of the build or the kernel
+        first = (str(exc).strip().splitlines() or [""])[0][:200]
+        print(f"gsplat {getattr(gsplat, '__version__', '?')} is installed but its CUDA kernels do not run here "
+              f"({type(exc).__name__}: {first}); rendering with the torch backend instead", file=sys.stderr)
+        return False
     return True
+
+
+def _render_one_gaussian_with_gsplat() -> None:
+    from recon.raster.gsplat_backend import render_gsplat
+
+    kw = {"dtype": torch.float32, "device": torch.device("cuda")}
+    K = torch.tensor([[20.0, 0.0, 8.0], [0.0, 20.0, 8.0], [0.0, 0.0, 1.0]], **kw)
+    cam = Camera(K=K, world_to_cam=torch.eye(4, **kw), width=16, height=16)
+    out = render_gsplat(torch.tensor([[0.0, 0.0, 2.0]], **kw), torch.tensor([[1.0, 0.0, 0.0, 0.0]], **kw),
+                        torch.full((1, 3), 0.1, **kw), torch.tensor([0.5], **kw), torch.ones(1, 3, **kw), cam,
+                        torch.zeros(3, **kw))
+    torch.cuda.synchronize()
+    if not torch.isfinite(out.image).all() or float(out.alpha.max()) <= 0.0:
+        raise RuntimeError("a test render came out empty or non-finite")
 
 
 def resolve_backend(backend: str, device: torch.device | str) -> str:

@@ -48,7 +48,7 @@ class _Project(torch.autograd.Function):
         g_q = np.zeros((N, 4), m.dtype)
         g_s = np.zeros((N, 3), m.dtype)
         if N:
-            P.project_backward(m, q, s, w, k[0, 0], k[1, 1], width, height, ctx.radii,
+            P.project_backward(m, q, s, w, k[0, 0], k[1, 1], k[0, 2], k[1, 2], width, height, ctx.radii,
                                _np(g_means2d).astype(m.dtype), _np(g_conics).astype(m.dtype),
                                _np(g_depths).astype(m.dtype), g_m, g_q, g_s)
         return torch.from_numpy(g_m), torch.from_numpy(g_q), torch.from_numpy(g_s), None, None, None, None

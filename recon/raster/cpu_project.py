@@ -27,14 +27,22 @@ def _rotation(q0, q1, q2, q3):
 
 
 @numba.njit(**_opts)
-def _setup(i, means, quats, scales, W, fx, fy, lim_x, lim_y):
-    """Everything the forward and the backward share for Gaussian i (all scalars)."""
+def jacobian_limits(fx, fy, cx, cy, width, height):
+    """(x_neg, x_pos, y_neg, y_pos): the range of t_x / t_z and t_y / t_z the projection's Jacobian is
+    evaluated in (project_ref.jacobian_limits; numba's copy)."""
+    gx, gy = 0.3 * (0.5 * width / fx), 0.3 * (0.5 * height / fy)
+    return cx / fx + gx, (width - cx) / fx + gx, cy / fy + gy, (height - cy) / fy + gy
+
+
+@numba.njit(**_opts)
+def _setup(i, means, quats, scales, W, fx, fy, lim):
+    """Everything the forward and the backward share for Gaussian i (all scalars); `lim`: jacobian_limits."""
     tx = W[0, 0] * means[i, 0] + W[0, 1] * means[i, 1] + W[0, 2] * means[i, 2] + W[0, 3]
     ty = W[1, 0] * means[i, 0] + W[1, 1] * means[i, 1] + W[1, 2] * means[i, 2] + W[1, 3]
     tz = W[2, 0] * means[i, 0] + W[2, 1] * means[i, 1] + W[2, 2] * means[i, 2] + W[2, 3]
     rx, ry = tx / tz, ty / tz
-    ux = min(max(rx, -lim_x), lim_x)
-    uy = min(max(ry, -lim_y), lim_y)
+    ux = min(max(rx, -lim[0]), lim[1])
+    uy = min(max(ry, -lim[2]), lim[3])
     r00, r01, r02, r10, r11, r12, r20, r21, r22, w, x, y, z, qn = _rotation(quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3])
     s0, s1, s2 = scales[i, 0], scales[i, 1], scales[i, 2]
     # A = Wr R S (3x3): camera-space axes of the Gaussian; V = A A^T
@@ -64,8 +72,7 @@ def _setup(i, means, quats, scales, W, fx, fy, lim_x, lim_y):
 
 @numba.njit(parallel=True, **_opts)
 def project_forward(means, quats, scales, W, fx, fy, cx, cy, width, height, means2d, conics, depths, radii):
-    lim_x = 1.3 * (0.5 * width / fx)
-    lim_y = 1.3 * (0.5 * height / fy)
+    lim = jacobian_limits(fx, fy, cx, cy, width, height)
     for i in numba.prange(means.shape[0]):
         tz = W[2, 0] * means[i, 0] + W[2, 1] * means[i, 1] + W[2, 2] * means[i, 2] + W[2, 3]
         depths[i] = tz
@@ -75,7 +82,7 @@ def project_forward(means, quats, scales, W, fx, fy, cx, cy, width, height, mean
             conics[i, 0] = conics[i, 1] = conics[i, 2] = 0.0
             continue
         tx, ty, tz, rx, ry, ux, uy, j00, j02, j11, j12, R, Q, S, A, B, sa, sb, sc = _setup(
-            i, means, quats, scales, W, fx, fy, lim_x, lim_y)
+            i, means, quats, scales, W, fx, fy, lim)
         det = sa * sc - sb * sb
         conics[i, 0] = sc / det
         conics[i, 1] = -sb / det
@@ -89,10 +96,9 @@ def project_forward(means, quats, scales, W, fx, fy, cx, cy, width, height, mean
 
 
 @numba.njit(parallel=True, **_opts)
-def project_backward(means, quats, scales, W, fx, fy, width, height, radii, g_means2d, g_conics, g_depths,
+def project_backward(means, quats, scales, W, fx, fy, cx, cy, width, height, radii, g_means2d, g_conics, g_depths,
                      g_means, g_quats, g_scales):
-    lim_x = 1.3 * (0.5 * width / fx)
-    lim_y = 1.3 * (0.5 * height / fy)
+    lim = jacobian_limits(fx, fy, cx, cy, width, height)
     for i in numba.prange(means.shape[0]):
         if radii[i] <= 0:
             for k in range(3):
@@ -102,7 +108,7 @@ def project_backward(means, quats, scales, W, fx, fy, width, height, radii, g_me
                 g_quats[i, k] = 0.0
             continue
         tx, ty, tz, rx, ry, ux, uy, j00, j02, j11, j12, R, Q, S, A, B, sa, sb, sc = _setup(
-            i, means, quats, scales, W, fx, fy, lim_x, lim_y)
+            i, means, quats, scales, W, fx, fy, lim)
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
         w, x, y, z, qn = Q
         s0, s1, s2 = S
@@ -168,10 +174,10 @@ def project_backward(means, quats, scales, W, fx, fy, width, height, radii, g_me
         g_ty = 0.0
         g_ux = gj02 * (-fx / tz)
         g_uy = gj12 * (-fy / tz)
-        if -lim_x <= rx <= lim_x:
+        if -lim[0] <= rx <= lim[1]:
             g_tx += g_ux / tz
             g_tz += -g_ux * tx / tz2
-        if -lim_y <= ry <= lim_y:
+        if -lim[2] <= ry <= lim[3]:
             g_ty += g_uy / tz
             g_tz += -g_uy * ty / tz2
         gmx, gmy = g_means2d[i, 0], g_means2d[i, 1]

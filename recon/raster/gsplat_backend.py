@@ -21,7 +21,9 @@ Same conventions as the other backends (OpenCV world_to_cam, pixel centres at +0
 dilation, near plane 0.01, alpha skipped below 1/255, T stop at 1e-4). Known
 differences, within the parity tests' tolerances: gsplat caps alpha at 0.999 (ours 0.99), decides
 membership per 16x16 tile rather than per pixel of the footprint square (contributions up to alpha
-~0.01 at footprint corners), and computes in float32 only.
+~0.01 at footprint corners), and computes in float32 only: other inputs are rendered in float32
+and the outputs returned in the inputs' dtype (gsplat's tile intersection reads a depth's bits as
+a float32; float64 depths sorted wrong, then its rasterizer raised).
 """
 from __future__ import annotations
 
@@ -33,6 +35,12 @@ from recon.raster.types import LOWPASS, NEAR_PLANE, Camera, RenderOutput, TILE
 
 
 def render_gsplat(means, quats, scales, opacities, colors, camera: Camera, background) -> RenderOutput:
+    if means.dtype != torch.float32:              # gsplat's kernels are float32 only
+        dtype = means.dtype
+        f32 = [t.float() for t in (means, quats, scales, opacities, colors, background)]
+        out = render_gsplat(*f32[:5], camera.to(torch.float32), f32[5])
+        return RenderOutput(out.image.to(dtype), out.alpha.to(dtype), out.depth.to(dtype), out.radii,
+                            out.means2d, lambda: out.max_weight.to(dtype))
     from gsplat import fully_fused_projection, isect_offset_encode, isect_tiles, rasterize_to_pixels
 
     W, H, C = camera.width, camera.height, colors.shape[1]

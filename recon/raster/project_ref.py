@@ -2,8 +2,9 @@
 
 Covariance R S S^T R^T from a (w, x, y, z) quaternion (normalised here; a zero quaternion gives the
 identity rotation) and linear scales; camera-space mean t = W mu + w; perspective Jacobian J with
-t_x/t_z and t_y/t_z clamped to 1.3 x the half field of view (as the reference 3DGS code does, so
-Gaussians far outside the image do not produce huge footprints); 2-D covariance J W Sigma W^T J^T
+t_x/t_z and t_y/t_z clamped to the image's extent plus 0.3 x the half field of view on each side
+(`jacobian_limits`: gsplat's rule, the reference 3DGS code's 1.3 x the half field of view for a
+centred principal point), so Gaussians far outside the image do not produce huge footprints; 2-D covariance J W Sigma W^T J^T
 + 0.3 I; its inverse (the conic); 3-sigma radius. Gaussians with t_z < NEAR_PLANE are culled
 (radius 0).
 """
@@ -29,6 +30,16 @@ def quat_to_rotmat(quats: torch.Tensor) -> torch.Tensor:
     ], -2)
 
 
+def jacobian_limits(fx, fy, cx, cy, width: int, height: int):
+    """(x_neg, x_pos, y_neg, y_pos): t_x / t_z is clamped to [-x_neg, x_pos] (t_y / t_z likewise) where
+    the projection's Jacobian is evaluated: the image's extent seen from the principal point plus 0.3
+    of the half field of view on each side, gsplat's rule (for a centred principal point it is the
+    reference 3DGS code's 1.3 x the half field of view). Off-centre principal points, which real
+    calibrations have, keep the margin on each side of the image rather than about its centre."""
+    gx, gy = 0.3 * (0.5 * width / fx), 0.3 * (0.5 * height / fy)
+    return cx / fx + gx, (width - cx) / fx + gx, cy / fy + gy, (height - cy) / fy + gy
+
+
 def project_ref(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, camera: Camera):
     """-> means2d [N,2], conics [N,3] (a, b, c of [[a,b],[b,c]]), depths [N], radii [N] (int32).
 
@@ -40,10 +51,9 @@ def project_ref(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, 
     tz = t[:, 2]
     valid = tz >= NEAR_PLANE
     tz_safe = torch.where(valid, tz, torch.ones_like(tz))
-    lim_x = 1.3 * (0.5 * camera.width / fx)
-    lim_y = 1.3 * (0.5 * camera.height / fy)
-    ux = (t[:, 0] / tz_safe).clamp(-lim_x, lim_x)
-    uy = (t[:, 1] / tz_safe).clamp(-lim_y, lim_y)
+    x_neg, x_pos, y_neg, y_pos = jacobian_limits(fx, fy, cx, cy, camera.width, camera.height)
+    ux = torch.clamp(t[:, 0] / tz_safe, min=-x_neg, max=x_pos)
+    uy = torch.clamp(t[:, 1] / tz_safe, min=-y_neg, max=y_pos)
     zeros = torch.zeros_like(tz)
     J = torch.stack([torch.stack([fx / tz_safe, zeros, -fx * ux / tz_safe], -1),
                      torch.stack([zeros, fy / tz_safe, -fy * uy / tz_safe], -1)], -2)  # [N,2,3]

@@ -1,9 +1,6 @@
 """One device per run: placement rules, every tensor a training step creates on the run's device,
-and the gsplat backend's tensor plumbing (means2d gradient, max_weight) checked on the CPU through
-a stand-in for gsplat built from the reference rasterizer. The CUDA-only parity tests are in
-test_gsplat_cuda.py."""
-import sys
-import types
+The gsplat backend on the CPU (gsplat's own API, its kernels in torch): test_gsplat_cpu.py; the
+CUDA-only parity tests: test_gsplat_cuda.py."""
 
 import pytest
 import torch
@@ -94,69 +91,3 @@ def test_training_creates_every_tensor_on_the_run_device(motion_scene, tmp_path,
     assert seen["deform"] and sum("test_psnr" in r for r in trainer.log) >= 2
     tensors = [*model.gaussians.parameters(), *model.deform.parameters()]
     assert all(t.device == CPU for t in tensors)
-
-
-# -- the gsplat backend's plumbing, on the CPU ----------------------------------------------------
-
-def gsplat_stand_in() -> types.ModuleType:
-    """gsplat's four calls as render_gsplat uses them, computed by our projection and reference
-    rasterizer (shapes as gsplat 1.5: a leading camera axis, x/y radii). The tile lists are replaced
-    by what the reference needs: isect_tiles passes the radii on as 'offsets' and the detached depths
-    as 'flatten_ids'."""
-    from recon.raster.project_ref import project_ref
-    from recon.raster.rasterize_ref import rasterize_ref
-
-    def fully_fused_projection(means, covars, quats, scales, viewmats, Ks, width, height, eps2d, near_plane,
-                               packed):
-        assert covars is None and not packed and viewmats.shape == (1, 4, 4) and Ks.shape == (1, 3, 3)
-        m2d, conics, depths, radii = project_ref(means, quats, scales, Camera(Ks[0], viewmats[0], width, height))
-        return radii[None, :, None].expand(1, -1, 2).contiguous(), m2d[None], depths[None], conics[None], None
-
-    def isect_tiles(means2d, radii, depths, tile_size, tiles_w, tiles_h):
-        assert means2d.shape[0] == 1 and radii.shape[-1] == 2
-        return None, radii[0, :, 0], depths[0].detach()
-
-    def isect_offset_encode(isect_ids, n_images, tiles_w, tiles_h):
-        return isect_ids
-
-    def rasterize_to_pixels(means2d, conics, colors, opacities, width, height, tile_size, offsets, flatten_ids):
-        bg = torch.zeros(colors.shape[-1], dtype=colors.dtype)
-        image, alpha, _, _ = rasterize_ref(means2d[0], conics[0], flatten_ids, offsets, opacities[0], colors[0],
-                                             bg, width, height)
-        return image[None], alpha[None, ..., None]
-
-    mod = types.ModuleType("gsplat")
-    for f in (fully_fused_projection, isect_tiles, isect_offset_encode, rasterize_to_pixels):
-        setattr(mod, f.__name__, f)
-    return mod
-
-
-def _render_and_backprop(render_fn, params, bg, cam, weights):
-    leaves = [p.clone().requires_grad_(True) for p in params] + [bg.clone().requires_grad_(True)]
-    out = render_fn(*leaves[:5], cam, leaves[5])
-    out.means2d.retain_grad()
-    w_img, w_alpha, w_depth = weights
-    ((out.image * w_img).sum() + (out.alpha * w_alpha).sum() + (out.depth * w_depth).sum()).backward()
-    return out, [p.grad for p in leaves]
-
-
-def test_gsplat_backend_plumbing_gives_densification_its_gradient_and_max_weight(monkeypatch):
-    from recon.raster.gsplat_backend import render_gsplat
-
-    monkeypatch.setitem(sys.modules, "gsplat", gsplat_stand_in())
-    params, bg = scene(150, 3, seed=5)
-    cam = camera(48, 36, f=50.0, seed=5)
-    g = torch.Generator().manual_seed(0)
-    weights = (torch.rand(36, 48, 3, generator=g, dtype=torch.float64), torch.rand(36, 48, generator=g, dtype=torch.float64),
-               torch.rand(36, 48, generator=g, dtype=torch.float64))
-    ref, ref_grads = _render_and_backprop(lambda *a: render(*a, backend="cpu"), params, bg, cam, weights)
-    out, grads = _render_and_backprop(render_gsplat, params, bg, cam, weights)
-    assert callable(out.max_weight_or_fn)              # not computed until read
-    for name in ("image", "alpha", "depth", "max_weight"):
-        torch.testing.assert_close(getattr(out, name), getattr(ref, name), atol=1e-9, rtol=1e-9, msg=name)
-    assert torch.equal(out.radii, ref.radii.to(torch.int32))
-    visible = ref.radii > 0
-    assert out.means2d.grad is not None and out.means2d.grad[visible].abs().sum() > 0
-    torch.testing.assert_close(out.means2d.grad[visible], ref.means2d.grad[visible], atol=1e-9, rtol=1e-7)
-    for name, a, b in zip(("means", "quats", "scales", "opacities", "colors", "background"), grads, ref_grads):
-        torch.testing.assert_close(a, b, atol=1e-9, rtol=1e-7, msg=name)
