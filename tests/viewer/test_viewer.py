@@ -94,7 +94,7 @@ def _wait(pred, timeout_s=90.0, what="the viewer did not answer in time"):
     """Wait for a condition (never for a guessed time): poll `pred` until it holds, failing after timeout_s."""
     t0 = time.monotonic()
     while not pred():
-        assert time.monotonic() - t0 < timeout_s, what
+        assert time.monotonic() - t0 < timeout_s, what() if callable(what) else what
         time.sleep(0.05)
 
 
@@ -166,10 +166,11 @@ def test_paths_that_are_neither_dataset_nor_run_are_refused_in_one_line(trained,
     assert json.loads(run_json.read_text())["scene_dir"]
 
 
-def _serve(paths: list[str], cwd: Path, env: dict | None = None):
-    """`e4dgs viewer PATHS --port 0` started; (process, the URL it printed, or None)."""
+def _serve(paths: list[str], cwd: Path, err_file: Path, env: dict | None = None):
+    """`e4dgs viewer PATHS --port 0` started, its stderr into `err_file` (readable while it runs, for
+    a failure's message); (process, the URL it printed, or None)."""
     proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", *paths, "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd, env=env)
+                            stdout=subprocess.PIPE, stderr=err_file.open("w"), text=True, cwd=cwd, env=env)
     for line in proc.stdout:
         if "open http" in line:
             return proc, line.split("open ")[1].split()[0]
@@ -200,22 +201,29 @@ def test_the_command_serves_then_stops_on_ctrl_c_leaving_no_process_and_no_file(
     env = {**os.environ, "HOME": str(home), "TMPDIR": str(tmp_path / "tmp")}
     (tmp_path / "tmp").mkdir()
     before = {p for p in motion_scene.rglob("*")}
-    proc, url = _serve([str(motion_scene)], cwd=work, env=env)
+    err_file = tmp_path / "viewer-stderr.txt"
+    proc, url = _serve([str(motion_scene)], work, err_file, env=env)
     try:
         assert url and url.startswith("http://localhost:")
         browser = HeadlessChromium(900, 600)
         try:
             browser.open(url)
-            _wait(lambda: browser.evaluate("document.body.innerText.includes('events')"))
+            t0 = time.monotonic()
+            _wait(lambda: browser.evaluate("document.body.innerText.includes('events')"), 90.0,
+                  lambda: f"the page never showed the scene's sources; its text: "
+                          f"{browser.evaluate('document.body.innerText')[:300]!r}; the viewer's stderr: "
+                          f"{err_file.read_text()[-1500:]!r}")
+            print(f"page ready after {time.monotonic() - t0:.1f} s")
             assert "sharp, cam0" in browser.evaluate("document.body.innerText")
         finally:
             browser.close()
         helpers = _descendants(proc.pid)
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=30)
+        out, _ = proc.communicate(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
+    err = err_file.read_text()
     assert proc.returncode == 0, err[-2000:]
     assert "viewer: stopped" in out and "Traceback" not in err
     _wait(lambda: not [p for p in helpers if Path(f"/proc/{p}").exists()], 30.0,
@@ -278,7 +286,7 @@ def test_the_command_serves_an_epoch_stamped_recording_in_a_browser(tmp_path):
     from viewer.headless import HeadlessChromium
 
     path, t = _epoch_file(tmp_path)
-    proc, url = _serve([str(path)], cwd=tmp_path)
+    proc, url = _serve([str(path)], tmp_path, tmp_path / "viewer-stderr.txt")
     try:
         assert url
         browser = HeadlessChromium(900, 600)
@@ -290,8 +298,9 @@ def test_the_command_serves_an_epoch_stamped_recording_in_a_browser(tmp_path):
         finally:
             browser.close()
         proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=30)
+        out, _ = proc.communicate(timeout=30)
     finally:
         if proc.poll() is None:
             proc.kill()
+    err = (tmp_path / "viewer-stderr.txt").read_text()
     assert proc.returncode == 0 and "viewer: stopped" in out and "Traceback" not in err, err[-2000:]
