@@ -41,6 +41,9 @@ class HeadlessChromium:
         page = next(t for t in targets if t.get("type") == "page")
         self.ws = connect(page["webSocketDebuggerUrl"], max_size=None, open_timeout=timeout_s)
         self._ids = itertools.count(1)
+        # A headless page never has the focus, and viser's client retries a failed connection only while
+        # its page has it: on a busy machine one failed first attempt left the page unconnected for good.
+        self.call("Emulation.setFocusEmulationEnabled", enabled=True)
 
     def call(self, method: str, timeout_s: float = 60.0, **params):
         i = next(self._ids)
