@@ -359,20 +359,24 @@ class Viewer:
             extra.remove()
         del handles[len(panels):]
 
-    def _serve(self, client, st: TabState, now: float) -> None:
+    def _serve(self, client, st: TabState, now: float, camera_ready: bool = True) -> None:
+        """One tick of a tab: its time, snap, background render (once the browser has reported its
+        camera) and side panels (which need no camera: they show as soon as the tab connects)."""
         with self._lock:
             if st.playing:
                 st.t = (st.t + TICK_S * 1e6 / (self.slowmo * self.duration_us)) % 1.0
                 st.dirty = st.panels_dirty = True
                 st.handles["time"].value = st.t * self.duration_us / 1000.0
-            if st.snap_request is not None or st.snapped is not None:
+            if camera_ready and (st.snap_request is not None or st.snapped is not None):
                 self._apply_snap(client, st)
             moved_ago = now - st.last_move
             scale = render_scale(moved_ago)
             due = st.dirty or (not st.rendered_full and scale == 1.0)
             panels_due = st.panels_dirty or (due and scale == 1.0 and len(self.models) > 1)
-            st.dirty = st.panels_dirty = False
-        if due:
+            st.panels_dirty = False
+            if camera_ready:
+                st.dirty = False
+        if due and camera_ready:
             if st.snapped is not None:
                 scale = 1.0
             if st.frusta_at != (st.t, st.camera):
@@ -393,10 +397,9 @@ class Viewer:
             with self._lock:
                 tabs = [(clients[c], st) for c, st in self._tabs.items() if c in clients]
             for client, st in tabs:
-                try:
-                    if getattr(client.camera, "_state", None) is None or client.camera._state.update_timestamp == 0.0:
-                        continue                       # the tab has not reported its camera yet
-                    self._serve(client, st, now)
+                try:                               # has the tab reported its camera yet?
+                    ready = getattr(client.camera, "_state", None) is not None and client.camera._state.update_timestamp != 0.0
+                    self._serve(client, st, now, ready)
                 except Exception as exc:  # noqa: BLE001 - a closing tab must not stop the others
                     if not self._stop.is_set():
                         print(f"viewer: tab {client.client_id}: {type(exc).__name__}: {exc}")

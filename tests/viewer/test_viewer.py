@@ -114,6 +114,38 @@ def test_the_headless_page_has_the_focus_viser_needs_to_retry_a_connection():
         browser.close()
 
 
+def test_a_tab_gets_its_panels_before_its_browser_reports_a_camera(motion_scene):
+    """The side panels (frames, events) need no camera: a tab whose browser has not reported one yet (a
+    busy machine's software WebGL; the second CI flake: the GUI but no panel within 90 s) gets them at
+    once; its 3D background waits for the camera and is not forgotten."""
+    from types import SimpleNamespace
+
+    from viewer.app import TabState, Viewer
+    from viewer.sources import open_source
+
+    viewer = Viewer([open_source(motion_scene)], port=0)
+    try:
+        added = []
+
+        class Handle(SimpleNamespace):
+            def remove(self):
+                added.remove(self)
+
+        def add_image(image, label, **_):
+            added.append(Handle(image=image, label=label))
+            return added[-1]
+
+        client = SimpleNamespace(client_id=7, gui=SimpleNamespace(add_image=add_image))
+        st = TabState()
+        st.handles["images"] = []
+        st.dirty = st.panels_dirty = True
+        viewer._serve(client, st, time.monotonic(), camera_ready=False)
+        assert [h.label for h in added] and any("events" in h.label for h in added)
+        assert st.dirty and 7 not in viewer.sent                    # the background still to render
+    finally:
+        viewer.stop()
+
+
 def test_a_headless_browser_sees_the_model_render_at_a_dataset_camera_and_time(trained, motion_scene, tmp_path):
     _need_chromium()
     from recon.model import load
@@ -185,12 +217,27 @@ def test_paths_that_are_neither_dataset_nor_run_are_refused_in_one_line(trained,
 def _serve(paths: list[str], cwd: Path, err_file: Path, env: dict | None = None):
     """`e4dgs viewer PATHS --port 0` started, its stderr into `err_file` (readable while it runs, for
     a failure's message); (process, the URL it printed, or None)."""
+    import threading
+
     proc = subprocess.Popen([sys.executable, "-m", "e4dgs.cli", "viewer", *paths, "--port", "0"],
                             stdout=subprocess.PIPE, stderr=err_file.open("w"), text=True, cwd=cwd, env=env)
+    proc.lines = []                          # its stdout, read on as it runs (a failure's message shows it)
+    url = None
     for line in proc.stdout:
+        proc.lines.append(line)
         if "open http" in line:
-            return proc, line.split("open ")[1].split()[0]
-    return proc, None
+            url = line.split("open ")[1].split()[0]
+            break
+    proc.reader = threading.Thread(target=lambda: proc.lines.extend(proc.stdout), daemon=True)
+    proc.reader.start()
+    return proc, url
+
+
+def _stopped(proc, timeout_s: float = 30.0) -> str:
+    """Wait for the viewer process to exit; its whole stdout."""
+    proc.wait(timeout=timeout_s)
+    proc.reader.join(timeout=timeout_s)
+    return "".join(proc.lines)
 
 
 def _descendants(pid: int) -> set[int]:
@@ -228,14 +275,14 @@ def test_the_command_serves_then_stops_on_ctrl_c_leaving_no_process_and_no_file(
             _wait(lambda: browser.evaluate("document.body.innerText.includes('events')"), 90.0,
                   lambda: f"the page never showed the scene's sources; its text: "
                           f"{browser.evaluate('document.body.innerText')[:300]!r}; the viewer's stderr: "
-                          f"{err_file.read_text()[-1500:]!r}")
+                          f"{err_file.read_text()[-1500:]!r}; its stdout: {''.join(proc.lines)[-1500:]!r}")
             print(f"page ready after {time.monotonic() - t0:.1f} s")
             assert "sharp, cam0" in browser.evaluate("document.body.innerText")
         finally:
             browser.close()
         helpers = _descendants(proc.pid)
         proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
+        out = _stopped(proc)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -314,7 +361,7 @@ def test_the_command_serves_an_epoch_stamped_recording_in_a_browser(tmp_path):
         finally:
             browser.close()
         proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
+        out = _stopped(proc)
     finally:
         if proc.poll() is None:
             proc.kill()
