@@ -16,6 +16,7 @@ error and the others go on. Each attempt's stdout/stderr and traceback are appen
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import socket
 import sys
@@ -223,7 +224,9 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
         return outcomes
     with ray_session(opts) as ray:
         # restarted if killed (by Ray's memory monitor, say): its count starts again, the grid goes on
-        tracker = ray.remote(num_cpus=0, max_restarts=-1)(_Tracker).options(name=tracker_name()).remote()
+        global _TRACKER_NAME
+        _TRACKER_NAME = f"e4dgs-taskpool-tracker-{os.getpid()}-{next(_RUNS)}"
+        tracker = ray.remote(num_cpus=0, max_restarts=-1)(_Tracker).options(name=_TRACKER_NAME).remote()
         remote = ray.remote(run_logged)
         pending = {}
         for s in specs:
@@ -251,12 +254,22 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                 status = f"done {len(outcomes) - failed}, running {running}, failed {failed}"
                 if status != getattr(bar, "postfix", None):   # redraw on a change only: a log gets a line
                     bar.set_postfix_str(status)                # per change, not one per second of polling
+        try:
+            ray.kill(tracker)          # now, not when Ray collects the handle (a later run's actor is another)
+        except Exception:      # noqa: BLE001 - already gone (killed for memory and not restarted)
+            pass
     return outcomes
 
 
+_RUNS = itertools.count()
+_TRACKER_NAME = ""
+
+
 def tracker_name() -> str:
-    """The progress actor's name (one per driver process)."""
-    return f"e4dgs-taskpool-tracker-{os.getpid()}"
+    """The name of the progress actor of this process's current (or last) run_tasks call: one per call,
+    so a second call never meets the first's actor, which Ray removes asynchronously (a busy machine
+    once had the second call refused: the name was still taken)."""
+    return _TRACKER_NAME
 
 
 def _running(ray, tracker, pending: dict) -> str:

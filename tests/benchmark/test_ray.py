@@ -315,6 +315,21 @@ def test_losing_the_progress_actor_costs_the_display_never_the_grid(tmp_path, lo
     assert "running ?" in capsys.readouterr().err          # the display says it lost count, and goes on
 
 
+def test_two_runs_in_one_process_never_share_a_progress_actor(tmp_path, local_ray):
+    """`e4dgs bench --ray` calls run_tasks twice (the dataset's scenes, then the jobs); Ray removes an
+    actor asynchronously, so on a busy machine the second call was once refused: its actor's name was
+    still taken by the first's."""
+    from common.argtypes import positive_int
+    from common.taskpool import tracker_name
+
+    names = []
+    for k in range(3):
+        out = run_tasks([TaskSpec(f"t{k}", positive_int, ("2",), log_path=tmp_path / f"t{k}.log")], RayOptions(),
+                        lambda o: names.append(tracker_name()), progress=False)
+        assert out[0].ok and out[0].value == 2
+    assert len(set(names)) == 3
+
+
 def test_rays_messages_go_to_the_log_with_one_line_on_the_console(tmp_path, capsys):
     """A memory kill printed a page of Ray's text (object store stats, top memory users, advice) into
     the console of `make benchmark`; it goes to the log now, one line on the console."""
