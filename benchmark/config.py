@@ -18,6 +18,7 @@ from common.config import ConfigError, build_config, to_dict
 
 REPO = Path(__file__).resolve().parent.parent
 PRESET_DIR = REPO / "configs" / "bench"
+SPREAD_METRICS = ("psnr", "ssim", "lpips", "psnr_luma", "psnr_dyn", "ssim_dyn", "lpips_dyn")   # benchmark.ties
 
 
 @dataclass(frozen=True)
@@ -138,9 +139,9 @@ class BenchConfig:
             if cell not in self.cells:
                 raise ConfigError(f"seed_spread: {cell!r} is not a cell")
             for metric, value in spread.items():
-                if metric not in ("psnr", "ssim", "lpips") or not 0 <= value < 100:
-                    raise ConfigError(f"seed_spread.{cell}.{metric}: expected psnr, ssim or lpips with a standard "
-                                      f"deviation >= 0, got {value!r}")
+                if metric not in SPREAD_METRICS or not 0 <= value < 100:
+                    raise ConfigError(f"seed_spread.{cell}.{metric}: expected one of {', '.join(SPREAD_METRICS)} "
+                                      f"with a standard deviation >= 0, got {value!r}")
         for scene, per_cell in self.scene_overrides.items():
             if scene not in self.scenes:
                 raise ConfigError(f"scene_overrides: {scene!r} is not one of the scenes ({', '.join(self.scenes)})")
@@ -430,8 +431,9 @@ def current_rows(cfg: BenchConfig, rows: list[dict], data_root: Path | None = No
 def older_note(row: dict, job: Job) -> str | None:
     """None when `row` was made by `job` as it is now; else what made it differ: "config" (another
     resolved config or input file: never reused), or a note for the tables naming the code version and
-    dataset it came from ("code 1a2b3c4d (git 5e6f7a8), dataset ..." ; "unknown version (git ...)" for a
-    row from before identities were recorded)."""
+    dataset it came from ("code 1a2b3c4d, dataset ..."; the row's git_commit says which checkout, and
+    one code version spans many commits) or "unknown version (git 5e6f7a8)" for a row from before
+    identities were recorded."""
     try:
         if row.get("config_hash") == job.config_hash():
             return None
@@ -444,7 +446,7 @@ def older_note(row: dict, job: Job) -> str | None:
         return f"unknown version{git}"
     if then.get("config") != now["config"] or then.get("inputs") != now["inputs"]:
         return "config"
-    parts = [f"code {then.get('code', '?')[:8]}{git}" if then.get("code") != now["code"] else "",
+    parts = [f"code {then.get('code', '?')[:8]}" if then.get("code") != now["code"] else "",
              f"dataset {then.get('dataset', '?')[:8]}" if then.get("dataset") != now["dataset"] else ""]
     return ", ".join(p for p in parts if p) or "unknown version"
 

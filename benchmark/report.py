@@ -184,7 +184,7 @@ def leaderboard(rows: list[dict], header: str = "", failed: list[dict] = (), ord
                 if r:
                     md.write(f"| {s} | {labels.get(c, c)} | {_fmt('psnr', r['psnr'])} | {_fmt('ssim', r['ssim'])} | "
                              f"{_fmt('lpips', r.get('lpips'))} | {r.get('iterations') or '–'} | {_fmt_s(r.get('wall_s'))} | "
-                             f"{r.get('n_gaussians') or '–'} |\n")
+                             f"{_fmt_s(r.get('n_gaussians'))} |\n")
     md.write(failed_section(list(failed)))
     return md.getvalue(), out_csv.getvalue()
 
