@@ -165,7 +165,7 @@ def tabled_rows(cfg, rows: list[dict], out: Path, data_root: Path | None = None,
     """The rows the tables show: the preset's current ones (benchmark.config.current_rows; with
     `reuse_older` also those of another code version or dataset, marked), saying how many rows
     results.jsonl keeps out of them."""
-    from benchmark.config import current_rows
+    from benchmark.grid import current_rows
 
     kept, stale = current_rows(cfg, rows, data_root, reuse_older)
     if stale:

@@ -13,7 +13,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-from benchmark.config import BenchConfig, Job
+from benchmark.config import BenchConfig
+from benchmark.grid import Job
 from benchmark.job_run import by_folder, failed_row, job_data_dir, row_summary, run_folder
 from common.taskpool import RayOptions, TaskOutcome, TaskSpec, cluster_gpus, ray_session, run_tasks
 

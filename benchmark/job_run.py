@@ -9,7 +9,8 @@ import time
 from pathlib import Path
 from typing import Callable, Protocol
 
-from benchmark.config import REPO, BenchConfig, Job
+from benchmark.config import REPO, BenchConfig
+from benchmark.grid import Job
 from benchmark.rows import ResultRow
 from common import provenance
 from common.machine import cpu_summary

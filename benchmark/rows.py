@@ -85,7 +85,7 @@ class ResultRow:
     floor_psnr_dyn: float | None = ABSENT
     cpu: str = ABSENT                 # the bench's runs: the CPU they trained on
     gpu: str | None = ABSENT          # the GPU's model (null on the CPU)
-    identity: dict = ABSENT           # the digests its config_hash is made of (benchmark.config.Job.identity_parts)
+    identity: dict = ABSENT           # the digests its config_hash is made of (benchmark.grid.Job.identity_parts)
     code_version: str = ABSENT        # identity["code"]: common.provenance.code_version
     recipe: dict = ABSENT             # the resolved fields that decide a result (benchmark.job_run.recipe_of)
     views_sha256: str = ABSENT        # SHA-256 of its views.json (per-view scores, render digests)

@@ -6,7 +6,7 @@ runs/<preset>/
   bench.json               the preset as run
 
 A job whose row exists with the same identity (config_hash: its resolved config, input files, the
-scene folder's content and the code version, benchmark.config.Job.identity_parts) is reused; a row
+scene folder's content and the code version, benchmark.grid.Job.identity_parts) is reused; a row
 made by another identity is not: the job trains again, unless `reuse_older`, which keeps a row of
 the same resolved config made by another code version or dataset (the tables mark it). A training
 folder resumes from its checkpoint, so a killed benchmark picks up where it stopped. Each row holds the final model's
@@ -22,7 +22,8 @@ from functools import partial
 from pathlib import Path
 from typing import Callable
 
-from benchmark.config import BenchConfig, Job, dump, jobs, older_note
+from benchmark.config import BenchConfig, dump
+from benchmark.grid import Job, jobs, older_note
 from benchmark.job_run import JobExecutor, complete_row, reused_row, run_jobs_here
 from benchmark.rows import read_results, write_results  # noqa: F401 - read_results: for callers
 from common.fileio import write_text_atomic

@@ -34,7 +34,7 @@ def versions(*modules: str, **extra: str) -> dict[str, str]:
 
 # The packages whose code computes a benchmark row's numbers (training, rendering, scoring, reading
 # the scene); a change to any of their sources makes every row another code version. Presentation
-# (tables, plots), the command line, the grid's bookkeeping (benchmark/config.py: what it composes is
+# (tables, plots), the command line, the presets and the grid's bookkeeping (benchmark/config.py, grid.py: what they compose is
 # the resolved config, its own part of the identity) and the dataset generator are left out: the
 # generator's output is covered by the dataset's own digest (scene_format.manifest.content_digest).
 CODE_PACKAGES = ("common", "e2vid", "recon", "scene_format")

@@ -10,7 +10,8 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from bench_cells import LABELS, MAIN_CELLS, described
-from benchmark.config import BenchConfig, CellSpec, jobs, load_bench
+from benchmark.config import BenchConfig, CellSpec, load_bench
+from benchmark.grid import jobs
 from common.metrics.image import psnr, score_pairs, ssim
 from benchmark.report import write_report
 from benchmark.runner import read_results, run_bench
@@ -429,9 +430,9 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
 
     import recon.api as api
     import scene_format.reader as reader
-    from benchmark.config import Job
+    from benchmark.grid import Job
 
-    from benchmark.config import _resolved
+    from benchmark.grid import _resolved
 
     _resolved.cache_clear()                  # configs resolved by earlier tests of this process
     counts = collections.Counter()
@@ -485,7 +486,7 @@ def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():
     current jobs' rows, rows scored from outside and ablation rows of a seed chosen at run time stay."""
     from dataclasses import replace
 
-    from benchmark.config import current_rows
+    from benchmark.grid import current_rows
 
     cfg = load_bench("quick")
     current = [j.identity() for j in jobs(cfg)]

@@ -11,7 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from benchmark.config import BenchConfig, CellSpec, current_rows, jobs
+from benchmark.config import BenchConfig, CellSpec
+from benchmark.grid import current_rows, jobs
 from benchmark.report import write_report
 from benchmark.runner import read_results, run_bench
 from common import provenance

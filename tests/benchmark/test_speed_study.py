@@ -6,7 +6,8 @@ import math
 import pytest
 
 from bench_cells import LABELS, MAIN_CELLS, described
-from benchmark.config import BenchConfig, CellSpec, jobs
+from benchmark.config import BenchConfig, CellSpec
+from benchmark.grid import jobs
 from benchmark.report import write_report
 from benchmark.speed_report import crossing_speed, speed_tables
 from common.config import ConfigError, build_config

@@ -376,7 +376,7 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
         recon.resolve_config("d3dgs", bad, {"train.iterations": 5})
     assert str(info.value).startswith(f"{bad}: train.lr.feature: expected a number")
     from benchmark.config import BenchConfig, CellSpec
-    from benchmark.config import jobs
+    from benchmark.grid import jobs
     from benchmark.job_run import resolve_job
     from common.config import build_config
 
@@ -588,7 +588,8 @@ def test_shipped_configs_leave_densification_room_above_their_initial_points():
     recipes' 15k cap and 20k room points). Every example config holds for objects and rooms; every
     bench preset's cell on each of its scenes, with the scene's overrides and the scene's kind."""
     import recon
-    from benchmark.config import jobs, load_bench
+    from benchmark.config import load_bench
+    from benchmark.grid import jobs
     from benchmark.job_run import resolve_job
     from datagen.config import scene_yaml_path
     from scene_format.config import read_scene_config
