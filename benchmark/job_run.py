@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Callable, Protocol
 
-from benchmark.config import REPO, BenchConfig
+from benchmark.config import BenchConfig
 from benchmark.grid import Job
 from benchmark.rows import ResultRow
 from common import provenance
@@ -53,11 +53,6 @@ def complete_row(row: dict, job: Job, cfg: BenchConfig, data_root: Path) -> bool
             and ("psnr_dyn" in row or not has_masks(job, data_root)))
 
 
-def resolve_job(job: Job):
-    """The typed method config of a job, resolved once (Job.method_config); ConfigError names the job."""
-    return job.method_config
-
-
 def data_stats(dataset: SceneDataset) -> dict:
     """What the scene folder holds, for the tables: its speed, the events per second per camera (mean
     over cameras), and for a speed variant its shutter's exposure, blur (median / p90 px) and
@@ -89,7 +84,7 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     from recon.api import fit
     from recon.model import load
 
-    method_cfg = method_cfg if method_cfg is not None else resolve_job(job)
+    method_cfg = method_cfg if method_cfg is not None else job.method_config
     dataset = SceneDataset(job_data_dir(job, data_root))       # opened once: training and every score below
     result = fit(dataset, job.method, method_cfg, out_root / job.folder, progress=progress, keep_initial=True)
     model, placement = result.model, (result.device, result.backend)       # score where it trained

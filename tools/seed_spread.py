@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import sys
 from collections import defaultdict
-from pathlib import Path
 
 from tools.tool_cli import existing_file, run_tool
 

@@ -377,7 +377,6 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
     assert str(info.value).startswith(f"{bad}: train.lr.feature: expected a number")
     from benchmark.config import BenchConfig, CellSpec
     from benchmark.grid import jobs
-    from benchmark.job_run import resolve_job
     from common.config import build_config
 
     cfg = build_config(BenchConfig, {"scenes": ["s"], "cells": {"a": CellSpec("d3dgs", overrides={"train.nosuch": 1})}})
@@ -590,7 +589,6 @@ def test_shipped_configs_leave_densification_room_above_their_initial_points():
     import recon
     from benchmark.config import load_bench
     from benchmark.grid import jobs
-    from benchmark.job_run import resolve_job
     from datagen.config import scene_yaml_path
     from scene_format.config import read_scene_config
 
