@@ -101,8 +101,8 @@ def run_e2vid(args: argparse.Namespace) -> int:
     from e2vid.weights import default_weights_path
     from common.fileio import write_text_atomic
     from common.imageio import write_png
-    from simulator.event_file import EventFile
-    from simulator.h5io import EventFileError
+    from eventio.event_file import EventFile
+    from eventio.h5io import EventFileError
 
     try:
         net, _ = load_checkpoint(args.weights or default_weights_path())

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simulator.event_file import EventFile
-from simulator.h5io import EventFileError
+from eventio.h5io import EventFileError
 
 _TIE_PAD = 1024   # extra rows read past the window to include events sharing its end time
 
@@ -32,7 +32,7 @@ class EventWindow:
 
 
 class EventSource(EventFile):
-    """One camera's event file (simulator.event_file.EventFile), with ESS windows cut by event index."""
+    """One camera's event file (simulator.event_file.EventFile: the file and its typed sensor), with ESS windows cut by event index."""
 
     def thresholds(self) -> tuple[float, float]:
         """The sensor's nominal contrast thresholds (C+, C-), from the stored simulator config."""

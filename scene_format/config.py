@@ -253,7 +253,7 @@ class SceneConfig:
     speed: float = 1.0     # this folder's time compression: the clip lasts duration_s / speed real seconds
     speeds: SpeedConfig = field(default_factory=SpeedConfig)   # speed variants written beside the scene
     source: SourceConfig = field(default_factory=SourceConfig)   # built in code, or a file's scene
-    # extra event formats written beside the HDF5 (datagen.exports; simulator.formats.FORMATS but h5)
+    # extra event formats written beside the HDF5 (datagen.exports; eventio.formats.FORMATS but h5)
     formats: tuple[str, ...] = ()
 
     def __post_init__(self):
@@ -263,7 +263,7 @@ class SceneConfig:
                               f"or leading dot), got {self.name!r}: the scene is written to <out>/<name>")
         if not self.speed >= 1:
             raise ConfigError(f"speed: expected a time compression factor >= 1, got {self.speed!r}")
-        from simulator.formats import FORMATS
+        from eventio.formats import FORMATS
 
         for fmt in self.formats:
             if fmt not in FORMATS or fmt == "h5":

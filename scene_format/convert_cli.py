@@ -1,5 +1,5 @@
 """`e4dgs export` and `e4dgs import`: event files between our HDF5 and the formats cameras and their
-software write (simulator.formats: AEDAT4, Prophesee EVT 3.0 / 2.0 .raw, ROS1 / ROS2 bags, .npz,
+software write (eventio.formats: AEDAT4, Prophesee EVT 3.0 / 2.0 .raw, ROS1 / ROS2 bags, .npz,
 E2VID text)."""
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ FORMAT_HELP = "aedat4 | evt3 | evt2 | rosbag | rosbag2 | npz | txt | h5"
 
 
 def add_export_parser(sub) -> None:
-    from simulator.formats import FORMATS
+    from eventio.formats import FORMATS
 
     p = sub.add_parser("export", help="an event file, or every camera of a scene, in another format",
                        description="Write an event file (.h5) in another format, or every camera of a generated "
@@ -29,9 +29,9 @@ def add_export_parser(sub) -> None:
 
 def run_export(args: argparse.Namespace) -> int:
     from scene_format.export import export_scene
-    from simulator.formats import write_stream
-    from simulator.h5io import EventFileError, read_events
-    from simulator.vendor_formats import FormatError
+    from eventio.formats import write_stream
+    from eventio.h5io import EventFileError, read_events
+    from eventio.vendor_formats import FormatError
 
     src = args.source
     if not src.exists():
@@ -63,9 +63,9 @@ def add_import_parser(sub) -> None:
 
 
 def run_import(args: argparse.Namespace) -> int:
-    from simulator.formats import read_recording
-    from simulator.h5io import EventFileError, write_events
-    from simulator.vendor_formats import FormatError
+    from eventio.formats import read_recording
+    from eventio.h5io import EventFileError, write_events
+    from eventio.vendor_formats import FormatError
 
     if not args.recording.exists():
         raise SystemExit(f"error: {args.recording}: no such file or folder")

@@ -1,6 +1,6 @@
 """A generated scene's cameras in other formats: one file per camera, or (ROS) one bag holding every
 camera the way ESIM's bags do: events, camera info, poses and the sharp frames (topics in
-simulator.rosbag_io)."""
+eventio.rosbag_io)."""
 from __future__ import annotations
 
 import os
@@ -11,8 +11,8 @@ import numpy as np
 from common.fileio import atomic_output
 from scene_format.cameras import rotmat_to_quat
 from scene_format.reader import SceneDataset
-from simulator import formats, rosbag_io
-from simulator.h5io import read_events
+from eventio import formats, rosbag_io
+from eventio.h5io import read_events
 
 
 def export_scene(scene_dir: str | os.PathLike, fmt: str, out: str | os.PathLike, message_us: int = 1000) -> list[Path]:

@@ -1,6 +1,6 @@
 """`e4dgs check`: verify a generated scene (or every scene under a dataset root) against its
 manifest: each listed file exists with the recorded size and SHA-256, and each event file passes
-the readers' content checks (simulator.event_check).
+the readers' content checks (eventio.event_check).
 
     problems = verify_scene(Path("data/quick/lego"))     # [] when everything matches
 """
@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from common.fileio import sha256_file
-from simulator.h5io import EventFileError, read_info
+from eventio.h5io import EventFileError, read_info
 
 
 def scene_dirs(path: Path) -> list[Path]:

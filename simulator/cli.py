@@ -102,7 +102,7 @@ UNSIGNED_TIME_FORMATS = ("evt3", "evt2", "rosbag", "rosbag2")
 def extra_output(out: Path, fmt: str) -> Path:
     """Where `--format fmt` writes beside the event file: its stem with the format's suffix (a ROS2 bag,
     a folder, as <stem>_rosbag2)."""
-    from simulator.formats import SUFFIX
+    from eventio.formats import SUFFIX
     return out.with_name(f"{out.stem}_rosbag2") if fmt == "rosbag2" else out.with_suffix(SUFFIX[fmt])
 
 
@@ -160,8 +160,8 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {exc}") from None
     print(f"{args.out}: {r.n_events} events from {len(files)} frames ({r.width}x{r.height})")
     if args.format:
-        from simulator.formats import write_stream
-        from simulator.h5io import read_events
+        from eventio.formats import write_stream
+        from eventio.h5io import read_events
 
         stream = read_events(args.out)
         for fmt in dict.fromkeys(args.format):
@@ -194,8 +194,8 @@ def add_view_parser(sub) -> None:
 
 def run_view(args: argparse.Namespace) -> int:
     from common.imageio import write_png
-    from simulator.event_file import EventFile
-    from simulator.h5io import EventFileError
+    from eventio.event_file import EventFile
+    from eventio.h5io import EventFileError
     from simulator.event_pictures import annotate, event_frame, parse_time_us, save_video, window_starts
 
     try:

@@ -11,7 +11,7 @@ from typing import Iterable
 import numpy as np
 
 from common.fileio import atomic_output
-from simulator.events import EventStream
+from eventio.events import EventStream
 
 ON_RGB = np.array([220, 40, 40], np.float64)    # red
 OFF_RGB = np.array([40, 80, 220], np.float64)   # blue (mirror of ON, so a tie is neutral)

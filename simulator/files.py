@@ -19,7 +19,7 @@ from common.config import dump_config
 from common.fileio import output_lock
 from common import imageio
 from simulator.config import SimulatorConfig
-from simulator.h5io import simulator_attrs
+from eventio.h5io import simulator_attrs
 from simulator.resumable import EventSpool, SpoolResumeError
 from simulator.simulator import EventSimulator, FrameError
 

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from simulator.events import make_events
+from eventio.events import make_events
 
 CROSS_TOL = 1e-9
 

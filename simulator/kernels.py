@@ -26,7 +26,7 @@ import math
 import numba
 import numpy as np
 
-from simulator.events import EVENT_DTYPE
+from eventio.events import EVENT_DTYPE
 from simulator.kernel_ref import CROSS_TOL
 
 # error_model="numpy": float division without Python's zero check (we never divide by zero;

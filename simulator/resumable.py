@@ -17,8 +17,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from simulator.events import EVENT_DTYPE, validate_events
-from simulator.h5io import EventFileWriter
+from eventio.events import EVENT_DTYPE, validate_events
+from eventio.h5io import EventFileWriter
 
 _CHUNK_EVENTS = 1 << 21
 

@@ -20,7 +20,7 @@ import numpy as np
 from common.config import to_dict
 from simulator import pixel
 from simulator.config import SimulatorConfig
-from simulator.events import EventStream, empty_events
+from eventio.events import EventStream, empty_events
 from simulator.kernel_ref import emit_events_ref
 from simulator.kernels import Workspace, emit_events
 from simulator.noise import NO_NOISE, draw_noise_events

@@ -3,8 +3,8 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-LAYERS = {"common": 0, "simulator": 1, "blender_scenes": 1, "scene_format": 2, "e2vid": 2, "datagen": 3,
-          "recon": 4, "benchmark": 5, "viewer": 5, "e4dgs": 6, "tools": 7}
+LAYERS = {"common": 0, "eventio": 1, "blender_scenes": 1, "simulator": 2, "scene_format": 3, "e2vid": 3,
+          "datagen": 4, "recon": 5, "benchmark": 6, "viewer": 6, "e4dgs": 7, "tools": 8}
 
 
 def package_imports() -> dict[str, set[tuple[str, str]]]:

@@ -26,7 +26,7 @@ from common.imageio import read_png_linear
 from tools.bench_render_rate import nearest_time_errors
 from datagen.build import generate_dataset
 from datagen.config import PRESETS_DIR
-from simulator.h5io import read_events
+from eventio.h5io import read_events
 from tools.tool_cli import output_file, positive_float, positive_int, run_tool
 
 RETRIES = 2           # restarts of a generator that died from a signal

@@ -16,7 +16,7 @@ from pathlib import Path
 from tools.tool_cli import positive_int, run_tool
 
 LIBRARIES = {"h5": ("h5py (ours)", "h5py (ours)"), "aedat4": ("dv-processing", "dv-processing"),
-             "evt3": ("ours (simulator.evt_codec)", "evt3"), "evt2": ("ours (simulator.evt_codec)", "expelliarmus"),
+             "evt3": ("ours (eventio.evt_codec)", "evt3"), "evt2": ("ours (eventio.evt_codec)", "expelliarmus"),
              "rosbag": ("rosbags + ours (messages)", "rosbags + ours (messages)"),
              "rosbag2": ("rosbags + ours (messages)", "rosbags + ours (messages)"),
              "npz": ("NumPy", "NumPy"), "txt": ("ours (E2VID text)", "ours (E2VID text)")}
@@ -28,8 +28,8 @@ def size_of(path: Path) -> int:
 
 def main(argv=None) -> int:
     from common.machine import cpu_summary
-    from simulator.formats import FORMATS, SUFFIX, read_recording, same_events, write_stream
-    from simulator.h5io import read_events
+    from eventio.formats import FORMATS, SUFFIX, read_recording, same_events, write_stream
+    from eventio.h5io import read_events
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--events", type=Path, default=Path("data/quick/hinge/events/cam0.h5"))

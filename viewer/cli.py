@@ -52,7 +52,7 @@ def check_host(host: str, timeout_s: float = 3.0) -> None:
 
 
 def _event_file_viewer(args: argparse.Namespace):
-    from simulator.h5io import EventFileError
+    from eventio.h5io import EventFileError
     from viewer.event_stream import EventStreamViewer
 
     try:

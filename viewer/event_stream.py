@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.event_file import EventFile
+from eventio.event_file import EventFile
 from simulator.event_pictures import annotate, event_frame
 from viewer.app import quiet_aborted_handshakes, server_url
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scene_format.reader import FrameRecord, SceneDataset
-from simulator.event_file import EventFile
+from eventio.event_file import EventFile
 from simulator.event_pictures import annotate, event_frame
 
 

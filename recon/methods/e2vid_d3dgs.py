@@ -24,7 +24,7 @@ from recon.config import TrainConfig
 from recon.methods import register
 from recon.methods.d3dgs import D3DGS, TrainView
 from recon.dataset_views import record_camera
-from simulator.event_file import EventFile
+from eventio.event_file import EventFile
 
 
 def reconstruct_camera(dataset: SceneDataset, camera: int, t_us: np.ndarray, net: torch.nn.Module | None = None,

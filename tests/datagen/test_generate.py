@@ -15,8 +15,8 @@ import pytest
 from scene_format.cameras import load_cameras, project
 from datagen.config import SCENE_NAMES, load_preset, resolve_scene
 from common.imageio import read_exr, read_png_linear
-from simulator.events import validate_events
-from simulator.h5io import read_events, read_info
+from eventio.events import validate_events
+from eventio.h5io import read_events, read_info
 from simulator.pixel import linear_to_srgb
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -434,7 +434,7 @@ def test_a_preset_asking_for_formats_writes_them_beside_the_hdf5_and_check_verif
     exports/, the same events as the canonical HDF5, listed in the manifest (SHA-256) so `check`
     verifies them; the fingerprint ignores the field, so a complete scene that gains a format gets
     only that export, without being generated again."""
-    from simulator.formats import read_recording, same_events
+    from eventio.formats import read_recording, same_events
 
     plain = tmp_path / "plain.yaml"
     plain.write_text((ROOT / "configs" / "dataset_tiny.yaml").read_text())

@@ -13,7 +13,7 @@ from common.config import ConfigError
 from datagen.config import resolve_scene
 from datagen.speed import check_interpolation, check_speeds, shutter_frames, variant_config
 from scene_format.naming import split_variant, variant_name
-from simulator.h5io import read_events
+from eventio.h5io import read_events
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = str(ROOT / "configs" / "dataset_paper.yaml")

@@ -65,7 +65,7 @@ def test_a_board_at_constant_image_speed_gives_the_fixed_rate_events_within_thei
     from blender_scenes import blur_plane as B
     from datagen.config import resolve_scene
     from scene_format.cameras import intrinsics_from_fov
-    from simulator.h5io import read_events
+    from eventio.h5io import read_events
 
     fixed, adaptive = tmp_path / "fixed.yaml", tmp_path / "adaptive.yaml"
     fixed.write_text(BOARD_PRESET)

@@ -17,7 +17,7 @@ import pytest
 from e4dgs.cli import main
 from common.imageio import write_exr
 from simulator import SimulatorConfig, simulate
-from simulator.h5io import write_events
+from eventio.h5io import write_events
 from tests.e4dgs.test_cli import grating_frames
 
 
@@ -330,7 +330,7 @@ def test_unresumable_checkpoint_and_stale_temporaries_are_cleared(frames_dir, tm
     assert r.rc == 0 and "cannot resume" in r.text and "starting" in r.text
     clean = tmp_path / "clean.h5"
     assert run_cli(_sim(frames_dir, clean, "--fps", "3000"), capsys).rc == 0
-    from simulator.h5io import read_events
+    from eventio.h5io import read_events
 
     assert np.array_equal(read_events(out).events, read_events(clean).events)
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []

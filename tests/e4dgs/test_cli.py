@@ -10,7 +10,7 @@ import pytest
 from e4dgs.cli import main
 from common.imageio import write_exr
 from simulator import SimulatorConfig, simulate
-from simulator.h5io import read_events, read_info
+from eventio.h5io import read_events, read_info
 from simulator.pixel import srgb_to_linear
 
 
@@ -176,7 +176,7 @@ def test_simulate_files_is_the_library_call_under_the_command(exr_dir, tmp_path)
 
 
 def test_simulate_writes_extra_formats_beside_the_h5(exr_dir, tmp_path):
-    from simulator.formats import read_recording, same_events
+    from eventio.formats import read_recording, same_events
 
     out = tmp_path / "ev.h5"
     assert main(["simulate", "--frames", str(exr_dir), "--fps", "3000", "--out", str(out),

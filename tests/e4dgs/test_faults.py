@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from e4dgs.cli import main
-from simulator import formats
-from simulator.events import EventStream, make_events
-from simulator.h5io import write_events
+from eventio import formats
+from eventio.events import EventStream, make_events
+from eventio.h5io import write_events
 from tests.conftest import mount_tmpfs, unmount
 
 

@@ -70,7 +70,7 @@ def test_simulate_refuses_outputs_of_the_wrong_kind_or_inside_its_input(frames, 
 
 
 def test_simulate_skips_hidden_files_refuses_doubled_frames_and_takes_negative_start_times(frames, tmp_path, capsys):
-    from simulator.h5io import read_events
+    from eventio.h5io import read_events
 
     (frames / "._frame_000.exr").write_bytes(b"\x00\x05\x16\x07 resource fork")      # a macOS copy's debris
     out = tmp_path / "ev.h5"
@@ -161,8 +161,8 @@ def test_view_shows_every_event_of_a_file_that_records_no_end(tmp_path, capsys):
     import cv2
     import h5py
 
-    from simulator.events import EventStream, make_events
-    from simulator.h5io import write_events
+    from eventio.events import EventStream, make_events
+    from eventio.h5io import write_events
 
     path = tmp_path / "three.h5"
     write_events(path, EventStream(make_events([0, 400, 900], [1, 2, 3], [1, 1, 1], [1, -1, 1]), 8, 4))
@@ -287,8 +287,8 @@ def test_check_compares_the_manifests_counts_with_the_files(motion_scene, tmp_pa
 def test_event_files_whose_attributes_disagree_with_their_events_are_refused(tmp_path, capsys):
     import h5py
 
-    from simulator.events import EventStream, make_events
-    from simulator.h5io import write_events
+    from eventio.events import EventStream, make_events
+    from eventio.h5io import write_events
 
     for attr, value, words in (("t_end_us", 100, "t_end_us = 100 us is before the last event (900 us)"),
                                ("n_events", 2, "n_events = 2 but the file holds 3 events")):

@@ -177,8 +177,8 @@ def test_every_numeric_config_field_refuses_values_outside_its_range_by_key(cls,
 # -- event-file inputs: empty, truncated, of the wrong kind -------------------------------------------
 @pytest.fixture(scope="module")
 def good_h5(tmp_path_factory) -> Path:
-    from simulator.events import EventStream, make_events
-    from simulator.h5io import write_events
+    from eventio.events import EventStream, make_events
+    from eventio.h5io import write_events
 
     rng = np.random.default_rng(0)
     n = 20_000

@@ -154,7 +154,7 @@ def test_multi_view_step_supervises_the_same_time_window_on_distinct_cameras(mot
     """views_per_step: the other cameras' windows cover the first window's interval exactly (their
     events are the file's events in (t_start, t_end]); the deformation runs once per end point for
     every camera; the loss is the mean of the single-camera losses; too many cameras is an error."""
-    from simulator.h5io import read_events
+    from eventio.h5io import read_events
 
     tr = trainer_for(motion_scene, tmp_path, **{"events.views_per_step": 2, "events.noise_sigma": 0.0})
     tr.model.meta.deform_enabled = True

@@ -12,7 +12,7 @@ from recon import event_supervision as ev
 from common.color_correction import correct_colors, fit_gain_offset
 from recon.event_windows import EventSource
 from recon.methods.e4dgs import E4DGS, PAPER_PIXELS
-from simulator.h5io import read_events
+from eventio.h5io import read_events
 
 
 def test_count_map_is_the_per_pixel_sum_of_polarities(rng):

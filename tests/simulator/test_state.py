@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from simulator import EventSimulator, SimulatorConfig
-from simulator.h5io import read_events
+from eventio.h5io import read_events
 from common.checkpoint import JobCheckpoint
 from simulator.resumable import EventSpool
 
@@ -35,7 +35,7 @@ def test_state_of_another_sensor_is_refused():
 
 
 def test_event_spool_resumes_at_the_synced_count(tmp_path, rng):
-    from simulator.events import make_events
+    from eventio.events import make_events
 
     def batch(t0, n):
         return make_events(t0 + np.arange(n), rng.integers(0, 8, n), rng.integers(0, 6, n), np.ones(n, np.int8))

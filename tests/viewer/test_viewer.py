@@ -316,8 +316,8 @@ def test_a_browsers_aborted_handshake_prints_nothing_but_other_errors_still_do(c
 
 
 def _epoch_file(tmp_path) -> tuple[Path, np.ndarray]:
-    from simulator.events import EventStream, make_events
-    from simulator.h5io import write_events
+    from eventio.events import EventStream, make_events
+    from eventio.h5io import write_events
 
     rng = np.random.default_rng(3)
     n = 4000

@@ -25,7 +25,7 @@ from common.config import ConfigError
 from recon.config import TrainConfig
 from recon.methods.d3dgs import D3DGS, TrainView
 from recon.dataset_views import record_camera
-from simulator.event_file import EventFile
+from eventio.event_file import EventFile
 
 
 @dataclass(frozen=True)

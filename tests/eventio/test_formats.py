@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from e4dgs.cli import main
-from simulator import evt_codec, formats, ros_messages, rosbag_io, vendor_formats
-from simulator.events import EventStream, make_events
-from simulator.h5io import read_events, write_events
-from simulator.vendor_formats import FormatError
+from eventio import evt_codec, formats, ros_messages, rosbag_io, vendor_formats
+from eventio.events import EventStream, make_events
+from eventio.h5io import read_events, write_events
+from eventio.vendor_formats import FormatError
 
 EVT3_TYPES = {0x0: "ADDR_Y", 0x2: "ADDR_X", 0x3: "VECT_BASE_X", 0x4: "VECT_12", 0x5: "VECT_8", 0x6: "TIME_LOW",
               0x8: "TIME_HIGH"}

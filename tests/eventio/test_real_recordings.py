@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from e4dgs.cli import main
-from simulator import evt_codec, formats, vendor_formats
-from simulator.event_file import EventFile
-from simulator.events import EventStream, make_events
-from simulator.export import read_e2vid_txt, read_npz
-from simulator.h5io import read_events, write_events
+from eventio import evt_codec, formats, vendor_formats
+from eventio.event_file import EventFile
+from eventio.events import EventStream, make_events
+from eventio.export import read_e2vid_txt, read_npz
+from eventio.h5io import read_events, write_events
 
 EPOCH_US = 1_700_000_000_123_456          # 2023-11-14, as DV stamps an AEDAT4 file
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from simulator.events import EVENT_DTYPE, EventStream, EventValidationError, make_events, to_torch, validate_events
+from eventio.events import EVENT_DTYPE, EventStream, EventValidationError, make_events, to_torch, validate_events
 
 
 def ev(t, x, y, p):

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from simulator import SimulatorConfig, simulate
-from simulator.events import EventStream, make_events
-from simulator.export import from_tonic, read_e2vid_txt, read_npz, to_tonic, write_e2vid_txt, write_npz
-from simulator.h5io import EventFileError, EventFileWriter, read_events, read_info, read_window, write_events
+from eventio.events import EventStream, make_events
+from eventio.export import from_tonic, read_e2vid_txt, read_npz, to_tonic, write_e2vid_txt, write_npz
+from eventio.h5io import EventFileError, EventFileWriter, read_events, read_info, read_window, write_events
 
 
 def random_stream(rng, n=20000, width=40, height=30, t0=0, span_us=250_000):
@@ -141,8 +141,8 @@ def test_the_same_events_give_the_same_bytes(tmp_path, rng):
 def test_e2vid_text_writes_negative_times_as_computed_by_hand(tmp_path):
     """The sign is written apart from the digits: -1939 us is -0.001939 s (divmod would give -1.998061),
     and our reader reads a correct negative time back (it used to read -0.001939 as +1939 us)."""
-    from simulator.events import EventStream, make_events
-    from simulator.export import parse_seconds, seconds_text
+    from eventio.events import EventStream, make_events
+    from eventio.export import parse_seconds, seconds_text
 
     t = [-2_000_000, -1_000_001, -1939, -5, 0, 5, 1_000_000]
     s = EventStream(make_events(t, [0, 1, 2, 3, 0, 1, 2], [0] * 7, [1, -1, 1, -1, 1, -1, 1]), 4, 2)
