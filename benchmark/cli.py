@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import add_ray_arguments, float_in, int_in, name_list, ray_options
+from common.argtypes import DeprecatedOption, add_main_input, add_ray_arguments, float_in, int_in, name_list, ray_options
 from common.fileio import output_inside_input
 
 
@@ -16,8 +16,12 @@ def add_bench_parser(sub) -> None:
                                    "leaderboard.md/.csv, accuracy_vs_time.png/.md, blur.md and ablation.md.")
     p.add_argument("--preset", default="quick", help=f"{' | '.join(preset_names())}, or a bench YAML file (default quick)")
     p.add_argument("--scenes", type=name_list, default=None, help="comma-separated subset of the preset's scenes")
-    p.add_argument("--methods", type=name_list, default=None, help="comma-separated subset of the preset's cells (quick: d3dgs_sharp, "
-                                                   "d3dgs_blur, deblur_d3dgs, e2vid_d3dgs, e4dgs, e4dgs_rgb)")
+    p.add_argument("--cells", type=name_list, default=None, help="comma-separated subset of the preset's cells (quick: d3dgs_sharp, "
+                                                 "d3dgs_blur, deblur_d3dgs, e2vid_d3dgs, e4dgs, e4dgs_rgb)")
+    p.add_argument("--methods", dest="cells", type=name_list, action=DeprecatedOption, help=argparse.SUPPRESS,
+                   instead="use --cells (it names the preset's cells)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a training config value of every cell, dotted keys (train.device=cuda); repeatable")
     p.add_argument("--studies", type=name_list, default="main,blur,ablation",
                    help="which studies to run: main, blur, ablation, speed (default main,blur,ablation; the speed "
                         "study runs only when named, as `make speed-study`)")
@@ -32,7 +36,7 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--data", type=Path, default=None, help="dataset root (default data/<dataset>)")
     p.add_argument("--out", type=Path, default=None, help="results folder (default runs/<preset>)")
     p.add_argument("--report", action="store_true", help="only regenerate tables and plots from results.jsonl")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     add_ray_arguments(p, "each (scene, cell) job (and any missing scene's generation)")
     p.set_defaults(func=run_bench_cli)
 
@@ -84,7 +88,7 @@ def add_score_parser(sub) -> None:
                                    "<out>/results.jsonl; the tables in <out> are written again. Optional "
                                    "<renders>/<scene>/snapshots/<seconds>/ give accuracy against training time.")
     p.add_argument("--data", type=Path, required=True, help="the dataset root the renders are of (data/quick)")
-    p.add_argument("--renders", type=Path, required=True, help="folder of <scene>/ render folders")
+    add_main_input(p, "renders", "RENDERS", "folder of <scene>/ render folders", old_option="--renders")
     p.add_argument("--name", required=True, help="the method's cell name in the results (not one of the preset's)")
     p.add_argument("--inputs", required=True, choices=("events", "rgb", "events+rgb"),
                    help="what the method saw: events-only renders are gray, scored after the log gain / offset")
@@ -182,10 +186,11 @@ def run_bench_cli(args: argparse.Namespace) -> int:
     from benchmark.report import write_report
     from benchmark.rows import read_results
     from benchmark.runner import run_bench
+    from recon.api import parse_set
     from common.config import ConfigError
 
     try:
-        cfg = load_bench(args.preset)
+        cfg = load_bench(args.preset, parse_set(args.overrides) if args.overrides else None)
     except ConfigError as exc:
         raise SystemExit(f"error: {exc}") from None
     name = Path(args.preset).stem
@@ -203,13 +208,13 @@ def run_bench_cli(args: argparse.Namespace) -> int:
     inside = output_inside_input(out, {"--data": data_root})
     if inside:
         raise SystemExit(f"error: --out {inside}")
-    scenes, cells = args.scenes, args.methods
+    scenes, cells = args.scenes, args.cells
     for s in scenes or []:
         if s not in cfg.scenes:
             raise SystemExit(f"error: --scenes: {s!r} is not in preset {name!r} ({', '.join(cfg.scenes)})")
     for c in cells or []:
         if c not in cfg.cells:
-            raise SystemExit(f"error: --methods: {c!r} is not a cell of preset {name!r} ({', '.join(cfg.cells)})")
+            raise SystemExit(f"error: --cells: {c!r} is not a cell of preset {name!r} ({', '.join(cfg.cells)})")
     header = report_header(name, cfg)
     if not args.report:
         studies = tuple(args.studies)

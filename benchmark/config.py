@@ -7,7 +7,7 @@ YAML files in configs/bench/ (`--preset quick` -> configs/bench/quick.yaml) load
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +23,7 @@ class CellSpec:
     """One row of the leaderboard: a registered method (bundled or a plug-in), its config and label."""
     method: str
     label: str = ""                                    # the tables' name for it ("": the cell's name)
-    config: str = ""                                   # recon config YAML, relative to the repository root
+    config: str = ""        # a training recipe: its name (`e4dgs/quick`) or a YAML path (relative to the repository root)
     overrides: dict[str, Any] = field(default_factory=dict)   # dotted keys, as `--set`
     speed: str = ""     # a speed level of the preset (speed_levels): train on that speed variant; "": the scene
 
@@ -163,14 +163,31 @@ class BenchConfig:
         return float(self.speed_levels[level]) if level else None
 
 
-def load_bench(preset: str | Path) -> BenchConfig:
-    path = Path(preset)
-    if not path.suffix:
-        path = PRESET_DIR / f"{preset}.yaml"
-    if not path.exists():
-        known = sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
-        raise ConfigError(f"{path}: no such benchmark preset (known: {', '.join(known)})")
-    return build_config(BenchConfig, path)
+# Bench presets renamed in 0.2 (kept until 0.3): old name -> (preset, overrides of every cell).
+RENAMED_PRESETS = {"paper_gpu": ("paper", {"train.device": "cuda", "train.backend": "gsplat"})}
+
+
+def load_bench(preset: str | Path, overrides: dict[str, Any] | None = None) -> BenchConfig:
+    """A bench preset (a name in configs/bench/ or a YAML file), with `overrides` (dotted keys, as
+    `e4dgs bench --set`) applied to every cell after the cell's own."""
+    import warnings
+
+    from common.config_files import DeprecatedName, find, shipped_names
+
+    if str(preset) in RENAMED_PRESETS:
+        new, extra = RENAMED_PRESETS[str(preset)]
+        sets = " ".join(f"--set {k}={v}" for k, v in extra.items())
+        warnings.warn(f"bench preset {preset!r} is an old name (kept until 0.3): use `--preset {new} {sets}`",
+                      DeprecatedName, stacklevel=2)
+        preset, overrides = new, {**extra, **(overrides or {})}
+    path = find("bench", preset)
+    if path is None:
+        where = Path(preset) if Path(preset).suffix else PRESET_DIR / f"{preset}.yaml"
+        raise ConfigError(f"{where}: no such benchmark preset (known: {', '.join(shipped_names('bench'))})")
+    cfg = build_config(BenchConfig, path)
+    if overrides:
+        cfg = replace(cfg, cells={name: replace(c, overrides={**c.overrides, **overrides}) for name, c in cfg.cells.items()})
+    return cfg
 
 
 def dump(cfg: BenchConfig) -> dict:

@@ -66,7 +66,7 @@ class Job:
         (every field, after defaults, as the trainer sees it). ConfigError names the job."""
         try:
             return _resolved(self.method, self.config, json.dumps(self.overrides, sort_keys=True, default=str),
-                             _file_stamp(REPO / self.config) if self.config else None)
+                             _file_stamp(_recipe_file(self.method, self.config)) if self.config else None)
         except (ConfigError, ValueError) as exc:
             raise ConfigError(f"bench job {self.key} ({self.method}, {self.config or 'defaults'}): {exc}") from None
 
@@ -122,8 +122,15 @@ def _resolved(method: str, config: str, overrides_json: str, stamp):
     against, share one resolution (the file read once per distinct job)."""
     from recon.api import resolve_config
 
-    return resolve_config(method, str(REPO / config) if config else None, json.loads(overrides_json),
+    return resolve_config(method, _recipe_file(method, config) if config else None, json.loads(overrides_json),
                           "the preset's overrides of this job (cells, studies, scene_overrides)")
+
+
+def _recipe_file(method: str, config: str) -> Path:
+    """A cell's `config:` (a recipe name such as `e4dgs/quick`, or a path) as a file (recon.config_path)."""
+    from recon.api import config_path
+
+    return config_path(config if Path(config).is_absolute() or not (REPO / config).is_file() else REPO / config, method)
 
 
 def _file_stamp(path: Path):

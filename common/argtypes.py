@@ -119,3 +119,57 @@ def ray_options(args: argparse.Namespace):
 
     return RayOptions(address=args.ray, retries=args.ray_retries, local_cpus=args.ray_local_cpus,
                       cpus_per_task=args.ray_cpus)
+
+
+# ---- one pattern for every command: the main input is the first positional argument ----------------
+
+class DeprecatedOption(argparse.Action):
+    """An option spelling kept for one release (0.2 -> 0.3): stores into the new option's dest and
+    prints one `warning:` line naming the new spelling."""
+
+    def __init__(self, option_strings, dest, instead: str = "", **kwargs):
+        self.instead = instead
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import sys
+
+        print(f"warning: {option_string} is deprecated (kept until 0.3): {self.instead}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+class CommandParser(argparse.ArgumentParser):
+    """A subcommand's parser: its main input (`add_main_input`) is required as the first positional
+    argument or by its old option spelling, and is named when missing."""
+
+    main_inputs: list[tuple[str, str]]
+
+    def parse_known_args(self, args=None, namespace=None):
+        ns, extras = super().parse_known_args(args, namespace)
+        for dest, metavar in getattr(self, "main_inputs", []):
+            old = getattr(ns, f"_{dest}_option", None)
+            if hasattr(ns, f"_{dest}_option"):
+                delattr(ns, f"_{dest}_option")
+            if old is not None:
+                if getattr(ns, dest, None) is not None:
+                    self.error(f"{metavar} given twice (as the first argument and by its old option)")
+                setattr(ns, dest, old)
+            if getattr(ns, dest, None) is None:
+                self.error(f"the following arguments are required: {metavar}")
+        return ns, extras
+
+
+def add_main_input(p: argparse.ArgumentParser, dest: str, metavar: str, help: str, old_option: str | None = None,
+                   type=None) -> None:
+    """The command's main input as its first positional argument (`e4dgs train data/quick/lego`); an
+    earlier option spelling (`--scene`) keeps working for one release with a deprecation line."""
+    from pathlib import Path
+
+    type = type or Path
+    p.add_argument(dest, nargs="?", type=type, metavar=metavar, help=help)
+    if old_option:
+        p.add_argument(old_option, dest=f"_{dest}_option", type=type, action=DeprecatedOption, help=argparse.SUPPRESS,
+                       instead=f"give the {metavar} as the first argument")
+    if not hasattr(p, "main_inputs"):
+        p.main_inputs = []
+    p.main_inputs.append((dest, metavar))

@@ -160,9 +160,9 @@ def add_check_parser(sub) -> None:
 
 
 def check_event_file(path: Path) -> int:
-    """`e4dgs check FILE.h5`: the file's layout and every event (simulator.event_check), one line."""
+    """`e4dgs check FILE.h5`: the file's layout and every event (eventio.event_check), one line."""
     from simulator.event_file import EventFile
-    from simulator.h5io import EventFileError
+    from eventio.h5io import EventFileError
 
     if path.suffix != ".h5":
         raise SystemExit(f"error: {path}: a file, not a folder, and not an event file (.h5): expected a generated "

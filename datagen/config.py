@@ -1,7 +1,7 @@
 """Scene and dataset configuration (pure Python; no bpy).
 
 Each scene has a YAML file `blender_scenes/<name>.yaml` declaring what it calls for. A preset
-(`configs/dataset_<preset>.yaml`) lists the scenes it covers and overrides values for all of them
+(`configs/datasets/<preset>.yaml`) lists the scenes it covers and overrides values for all of them
 (e.g. a shorter clip). The resolved config, scene YAML with the preset's overrides merged in, is
 written to `<scene>/scene.yaml`.
 """
@@ -17,7 +17,7 @@ from scene_format.config import SceneConfig, deep_merge, parse_scene, read_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = ROOT / "blender_scenes"
-PRESETS_DIR = ROOT / "configs"
+PRESETS_DIR = ROOT / "configs" / "datasets"
 SCENE_NAMES = ("lego", "rubiks_cube", "mc_toy", "hinge", "cubes", "capsule", "restroom", "garage")
 
 
@@ -64,11 +64,20 @@ def scene_yaml_path(name: str) -> Path:
     return SCENES_DIR / f"{name}.yaml"
 
 
+def preset_file(preset: str | Path) -> Path:
+    """A dataset preset's YAML: a file path, or a name in configs/datasets/ (common.config_files)."""
+    from common.config_files import find, shipped_names
+
+    path = find("datasets", preset)
+    if path is None:
+        where = Path(preset) if Path(preset).suffix in (".yaml", ".yml") else PRESETS_DIR / f"{preset}.yaml"
+        raise ConfigError(f"unknown dataset preset {str(preset)!r} (no {where}); known presets: "
+                          f"{', '.join(shipped_names('datasets'))}")
+    return path
+
+
 def load_preset(preset: str | Path) -> PresetConfig:
-    path = Path(preset) if Path(preset).suffix in (".yaml", ".yml") else PRESETS_DIR / f"dataset_{preset}.yaml"
-    if not path.exists():
-        known = sorted(p.stem.removeprefix("dataset_") for p in PRESETS_DIR.glob("dataset_*.yaml"))
-        raise ConfigError(f"unknown dataset preset {str(preset)!r} (no {path}); known presets: {', '.join(known)}")
+    path = preset_file(preset)
     data = read_yaml_mapping(path)        # its errors name the file already
     try:
         preset_cfg = from_dict(PresetConfig, data)

@@ -47,7 +47,7 @@ from common.config import ConfigError, dump_config
 from common.argtypes import positive_int
 from common.fileio import link_tree, output_lock, sha256_file, write_text_atomic
 from common.imageio import write_exr, write_png_srgb
-from simulator.h5io import read_info, simulator_attrs
+from eventio.h5io import read_info, simulator_attrs
 from common.color import rec709_luma
 from simulator.resumable import EventSpool, can_resume
 from simulator.simulator import EventSimulator

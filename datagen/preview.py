@@ -14,7 +14,7 @@ import numpy as np
 from scene_format.reader import SceneDataset
 from common.imageio import write_png
 from common.metrics import psnr
-from simulator.h5io import read_window
+from eventio.h5io import read_window
 from simulator.event_pictures import event_frame
 
 

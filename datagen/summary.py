@@ -9,7 +9,7 @@ import numpy as np
 
 from scene_format.naming import split_variant
 from scene_format.reader import SceneDataset
-from simulator.h5io import read_window
+from eventio.h5io import read_window
 
 
 def blur_table(root: Path, scenes: list[str] | None = None) -> str:

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from common.argtypes import nonnegative_int, positive_float, positive_int
+from common.argtypes import add_main_input, nonnegative_int, positive_float, positive_int
 
 MIN_EVENTS_PER_WINDOW = 100     # fewer than this per window is noise, and a run of hours
 LONG_RUN_WINDOWS = 2000         # more windows than this: say how long it will take before starting
@@ -24,7 +24,7 @@ def add_train_e2vid_parser(sub) -> None:
     p.add_argument("--out", type=Path, default=Path("runs/e2vid"), help="training folder (default runs/e2vid)")
     p.add_argument("--export", type=Path, default=None, help="also write the weights (official layout) here")
     p.add_argument("--val-sequences", type=positive_int, default=8, help="held-out simulated sequences for the report")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_train_e2vid)
 
 
@@ -64,7 +64,7 @@ def add_e2vid_parser(sub) -> None:
     p = sub.add_parser("e2vid", help="reconstruct intensity video from an event file",
                        description="Run an E2VID/FireNet network over an event file (DSEC-layout .h5) and write "
                                    "PNG frames plus timestamps.txt.")
-    p.add_argument("--events", type=Path, required=True, help="event file, e.g. data/quick/lego/events/cam0.h5")
+    add_main_input(p, "events", "EVENTS", "event file, e.g. data/quick/lego/events/cam0.h5", old_option="--events")
     p.add_argument("--out", type=Path, required=True, help="output folder for frames")
     p.add_argument("--weights", type=Path, default=None, help="network file (default: the shipped weights)")
     p.add_argument("--dt-ms", type=positive_float, default=None,

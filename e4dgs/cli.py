@@ -25,26 +25,46 @@ def build_parser() -> argparse.ArgumentParser:
     from simulator.cli import add_simulate_parser, add_view_parser
     from viewer.cli import add_viewer_parser
 
-    parser = argparse.ArgumentParser(prog="e4dgs", description="Event-camera 4D reconstruction toolkit")
+    from common.argtypes import CommandParser
+
+    parser = argparse.ArgumentParser(prog="e4dgs", formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     description="Event-camera 4D reconstruction toolkit: synthetic multi-view event "
+                                                 "datasets, E-4DGS and baselines, a leaderboard.",
+                                     epilog="`e4dgs COMMAND --help` describes each command.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of failures")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_simulate_parser(sub)
-    add_view_parser(sub)
-    add_export_parser(sub)
-    add_import_parser(sub)
-    add_dataset_parser(sub)
-    add_check_parser(sub)
-    add_masks_parser(sub)
-    add_train_parser(sub)
-    add_render_parser(sub)
-    add_train_e2vid_parser(sub)
-    add_e2vid_parser(sub)
-    add_bench_parser(sub)
-    add_testviews_parser(sub)
-    add_score_parser(sub)
-    add_verify_parser(sub)
-    add_viewer_parser(sub)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=CommandParser)
+    for add in (add_dataset_parser, add_check_parser, add_masks_parser, add_simulate_parser,
+                add_train_parser, add_render_parser, add_e2vid_parser, add_train_e2vid_parser,
+                add_bench_parser, add_testviews_parser, add_score_parser, add_verify_parser,
+                add_viewer_parser, add_view_parser,
+                add_export_parser, add_import_parser):
+        add(sub)
+    group_commands(parser, sub)
     return parser
+
+
+# `e4dgs --help` lists the commands by the stage of the work they belong to
+STAGES = (("data", ("dataset", "check", "masks", "simulate")),
+          ("train", ("train", "render", "e2vid", "train-e2vid")),
+          ("score", ("bench", "testviews", "score", "verify")),
+          ("look", ("viewer", "draw-events")),
+          ("convert", ("export", "import")))
+RENAMED_COMMANDS = {"view": "draw-events"}      # old name -> new (kept until 0.3)
+
+
+def group_commands(parser: argparse.ArgumentParser, sub) -> None:
+    """Replace argparse's flat list of commands with one list per stage (STAGES names every command)."""
+    helps = {a.dest: a.help for a in sub._choices_actions}
+    listed = [c for _, names in STAGES for c in names]
+    if sorted(listed) != sorted(helps):
+        raise RuntimeError(f"e4dgs: STAGES and the commands differ: {sorted(set(listed) ^ set(helps))}")
+    width = max(map(len, listed)) + 2
+    lines = []
+    for stage, names in STAGES:
+        lines.append(f"{stage}:")
+        lines += [f"  {n:<{width}}{helps[n]}" for n in names]
+    parser.description += "\n\ncommands by stage:\n" + "\n".join(lines)
+    sub._choices_actions.clear()          # listed above instead
 
 
 def describe_failure(exc: BaseException) -> str:
@@ -79,14 +99,14 @@ def join_negative_values(argv: list[str]) -> list[str]:
 
 
 OUTPUT_OPTIONS = ("out", "export")             # every other path an option names is an input
-PROTECTED_INPUTS = frozenset({"--frames", "--scene", "--data", "--renders", "recording", "source", "--events",
-                              "--timestamps", "--config", "--weights", "events", "data"})
+PROTECTED_INPUTS = frozenset({"FRAMES", "SCENE", "RUN", "--data", "RENDERS", "recording", "source", "EVENTS",
+                              "--timestamps", "--config", "--weights", "data"})
 
 
 def _option_name(dest: str, parser_actions) -> str:
     for a in parser_actions:
         if a.dest == dest:
-            return a.option_strings[-1] if a.option_strings else dest
+            return a.option_strings[-1] if a.option_strings else (a.metavar if isinstance(a.metavar, str) else dest)
     return dest
 
 
@@ -118,6 +138,10 @@ def main(argv: list[str] | None = None) -> int:
     argv = join_negative_values([a for a in argv if a != "--debug"])
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command in RENAMED_COMMANDS:
+        print(f"warning: `e4dgs {args.command}` is deprecated (kept until 0.3): it is `e4dgs "
+              f"{RENAMED_COMMANDS[args.command]}`", file=sys.stderr)
+        args.command = RENAMED_COMMANDS[args.command]
     check_outputs_apart(args, parser)
     try:
         with warnings.catch_warnings():   # warnings as one line each; the toolkit's own every time

@@ -1,6 +1,6 @@
 """The reconstruction API: `fit` a registered method on a generated scene, `load` a trained model.
 
-    result = recon.fit("data/quick/lego", method="d3dgs", config="configs/recon/d3dgs_quick.yaml",
+    result = recon.fit("data/quick/lego", method="d3dgs", config="quick",
                        out_dir="runs/lego/d3dgs")       # a TrainResult: .model, .run_dir, .log, .train_s, ...
     image = result.model.render(camera, t)
     scores = recon.evaluate(result.model, "data/quick/lego")   # {psnr, ssim[, lpips], n_images} on the test views
@@ -22,27 +22,19 @@ from recon.model import DynamicGaussians, load  # noqa: F401  (re-exported)
 from recon.trainer import Trainer
 
 
-def config_path(config: str | Path) -> Path:
-    """A method config file: the path as given when it exists; else, from any working folder, the same
-    relative path in the toolkit's checkout (`configs/recon/d3dgs_quick.yaml`), or the name of a
-    shipped config (`d3dgs_quick`: configs/recon/, then configs/recon/bench/; `bench/e4dgs_quick`). ConfigError naming
-    the path and the shipped names otherwise."""
-    from common.provenance import REPO
+def config_path(config: str | Path, method: str | None = None) -> Path:
+    """A training recipe's file: the path as given when it exists; else, from any working folder, the
+    same relative path in the toolkit's checkout, or a shipped recipe's name: `quick` for `method`
+    (configs/recipes/<method>/quick.yaml), `e4dgs/quick`, `d3dgs/mlp` (common.config_files; names
+    from before 0.2 resolve with a deprecation line). ConfigError naming the path and the shipped
+    names otherwise."""
+    from common.config_files import find, shipped_names
 
-    path = Path(config)
-    if path.exists():
-        return path
-    shipped = REPO / "configs" / "recon"
-    candidates = [] if path.is_absolute() else [REPO / path]
-    if not path.is_absolute():
-        named = path if path.suffix in (".yaml", ".yml") else path.with_name(f"{path.name}.yaml")
-        candidates += [shipped / named] + ([shipped / "bench" / named] if len(path.parts) == 1 else [])
-    for c in candidates:
-        if c.is_file():
-            return c
-    known = sorted({p.stem for p in shipped.glob("*.yaml")} | {f"bench/{p.stem}" for p in shipped.glob("bench/*.yaml")})
-    raise ConfigError(f"{config}: cannot read config file (no such file, nor a shipped config of that name; "
-                      f"shipped: {', '.join(known)})")
+    found = find("recipes", config, method)
+    if found is None:
+        raise ConfigError(f"{config}: cannot read config file (no such file, nor a shipped recipe of that name; "
+                          f"shipped: {', '.join(shipped_names('recipes'))})")
+    return found
 
 
 def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any] | None = None,
@@ -51,7 +43,7 @@ def resolve_config(method: str, config: Any = None, overrides: Mapping[str, Any]
     dotted-key overrides applied on top. Unknown keys raise ConfigError naming the key and its source
     (the file, or `overrides_source` for an override). A path is found as `config_path` says."""
     if isinstance(config, (str, Path)):
-        config = config_path(config)
+        config = config_path(config, method)
     return build_config(get_method(method).config_cls, config, overrides, overrides_source)
 
 

@@ -7,20 +7,22 @@ from pathlib import Path
 
 import numpy as np
 
-from common.argtypes import float_in
+from common.argtypes import add_main_input, float_in
 
 
 def add_train_parser(sub) -> None:
     p = sub.add_parser("train", help="train a reconstruction method on a generated scene",
                        description="Train a registered method on one scene folder. A killed run resumes from its "
                                    "last checkpoint when started again with the same arguments.")
-    p.add_argument("--scene", type=Path, required=True, help="scene folder (e.g. data/quick/lego)")
+    add_main_input(p, "scene", "SCENE", "scene folder (e.g. data/quick/lego)", old_option="--scene")
     p.add_argument("--method", default="d3dgs", help="a registered method (default d3dgs; an unknown name lists them)")
-    p.add_argument("--config", type=Path, default=None, help="method config YAML (default: the method's defaults)")
+    p.add_argument("--config", type=Path, default=None,
+                   help="training recipe: a YAML file or a shipped recipe's name (`quick`: the leaderboard's recipe "
+                        "of --method, configs/recipes/<method>/quick.yaml; `e4dgs/mlp`); default: the method's defaults")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, dotted keys (e.g. train.iterations=3000); repeatable")
     p.add_argument("--out", type=Path, default=None, help="output folder (default runs/<scene>/<method>)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (the log still records every evaluation)")
     p.set_defaults(func=run_train)
 
 
@@ -41,7 +43,7 @@ def add_render_parser(sub) -> None:
     p = sub.add_parser("render", help="render a trained model from a camera at times in [0, 1]",
                        description="Render a trained model. --camera is a dataset camera index (posed along its "
                                    "recorded trajectory) or a JSON file {K: 3x3, c2w_opencv: 4x4, width, height}.")
-    p.add_argument("--model", type=Path, required=True, help="training folder or model .pt file")
+    add_main_input(p, "model", "RUN", "training folder or model .pt file", old_option="--model")
     p.add_argument("--camera", default=None, help="camera index, or a JSON camera file")
     p.add_argument("--t", type=float_in(0.0, 1.0, "a normalised time"), nargs="+", default=None, help="normalised times in [0, 1]")
     p.add_argument("--test-views", type=Path, default=None, metavar="SCENE",

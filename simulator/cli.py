@@ -1,11 +1,11 @@
-"""`e4dgs simulate` and `e4dgs view`: frames -> event file, event file -> picture or video."""
+"""`e4dgs simulate` and `e4dgs draw-events`: frames -> event file, event file -> picture or video."""
 from __future__ import annotations
 
 import argparse
 import re
 from pathlib import Path
 
-from common.argtypes import positive_float, positive_int, seed_int
+from common.argtypes import add_main_input, positive_float, positive_int, seed_int
 
 IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 
@@ -76,15 +76,16 @@ def add_simulate_parser(sub) -> None:
     p = sub.add_parser("simulate", help="convert a folder of frames into an event file (DSEC HDF5)",
                        description="Simulate a DVS on a frame sequence. A killed run resumes from its last "
                                    "checkpoint when started again with the same inputs.")
-    p.add_argument("--frames", type=Path, required=True,
-                   help="folder of frames sorted by name: EXR (linear) or PNG (sRGB, linearised)")
+    add_main_input(p, "frames", "FRAMES", "folder of frames sorted by name: EXR (linear) or PNG, JPEG, TIFF, BMP "
+                   "(sRGB, linearised)", old_option="--frames")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--fps", type=positive_float, help="frame rate; frame k is at t0 + round(k * 1e6 / fps) us")
     src.add_argument("--timestamps", type=Path, help="file with one microsecond timestamp per frame")
     p.add_argument("--t0", default="0", help="time of the first frame with --fps: us, or with a unit (10ms, -5ms, "
                                              "0.5s); may be negative (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
-    p.add_argument("--config", type=Path, help="simulator config YAML (default: noise-free, C = 0.2)")
+    p.add_argument("--config", type=Path, help="sensor config: a YAML file or a shipped sensor's name (ideal, realistic: "
+                                               "configs/sensors/); default: noise-free, C = 0.2")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
     p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
                    help="save a resumable checkpoint every N frames (default 500)")
@@ -113,12 +114,24 @@ def check_output(out: Path, frames: Path) -> None:
     if out.is_dir():
         raise SystemExit(f"error: --out {out}: is a folder; expected an event file name ending in .h5")
     if out.resolve().parent == frames.resolve():
-        raise SystemExit(f"error: --out {out}: inside the --frames folder; write the events elsewhere")
+        raise SystemExit(f"error: --out {out}: inside the FRAMES folder; write the events elsewhere")
     for folder in [out.parent, *out.parent.parents]:      # the nearest existing ancestor must be a folder
         if folder.exists():
             if not folder.is_dir():
                 raise SystemExit(f"error: --out {out}: {folder} is not a folder, so the event file cannot be made there")
             break
+
+
+def sensor_file(config: Path) -> Path:
+    """--config as a file: the path given, or a shipped sensor's name (common.config_files)."""
+    from common.config import ConfigError
+    from common.config_files import find, shipped_names
+
+    found = find("sensors", config)
+    if found is None:
+        raise ConfigError(f"{config}: cannot read config file (no such file, nor a shipped sensor of that name; "
+                          f"shipped: {', '.join(shipped_names('sensors'))})")
+    return found
 
 
 def run_simulate(args: argparse.Namespace) -> int:
@@ -127,7 +140,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from simulator.files import simulate_files
 
     try:
-        config = load_config(SimulatorConfig, args.config) if args.config else SimulatorConfig()
+        config = load_config(SimulatorConfig, sensor_file(args.config)) if args.config else SimulatorConfig()
     except ConfigError as exc:
         raise SystemExit(f"error: {exc}") from None
     check_output(args.out, args.frames)
@@ -178,8 +191,12 @@ MAX_VIEW_FRAMES = 100_000     # frames of one video (~25 min of drawing at ~70 f
 
 
 def add_view_parser(sub) -> None:
-    p = sub.add_parser("view", help="draw events of a time window as a PNG, or a sliding window as MP4")
-    p.add_argument("events", type=Path, help="event file (.h5)")
+    p = sub.add_parser("draw-events", aliases=["view"],
+                       help="draw the events of a time window as a PNG, or of a sliding window as an MP4",
+                       description="ON events red, OFF events blue on white, stronger with more events; each image "
+                                   "labelled with its time window and the colour key. (`view` is this command's "
+                                   "old name, kept until 0.3.)")
+    add_main_input(p, "events", "EVENTS", "event file (.h5; other formats: `e4dgs import` first)")
     p.add_argument("--t0", default=None, help="window start (us, or with unit: 10ms, 0.5s); default: start")
     p.add_argument("--t1", default=None, help="window end (exclusive); default: end of the stream")
     p.add_argument("--out", type=Path, required=True, help=".png for one frame, .mp4 for a video")

@@ -1,5 +1,13 @@
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+# the test-only dataset presets (tiny_motion, tiny_pan) live in tests/fixtures/configs/datasets/: the
+# config lookup searches E4DGS_CONFIG_PATH after the shipped folders, here and in every subprocess
+os.environ["E4DGS_CONFIG_PATH"] = os.pathsep.join(
+    [str(Path(__file__).resolve().parent / "fixtures" / "configs")] + [p for p in os.environ.get("E4DGS_CONFIG_PATH", "").split(os.pathsep) if p])
 
 from simulator import SimulatorConfig
 

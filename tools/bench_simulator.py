@@ -4,7 +4,7 @@ Input: 600 frames of 346x260, a vertical sinusoidal grating of period 32 px movi
 brightness 20..235 of 255 (frames are DN/255, used as linear intensity), at 3000 FPS.
 Configs: `clean` (noise-free, C = 0.2) and `all effects` (mismatch, low-pass, refractory, leak,
 shot noise, hot pixels), each with the log response and with v2e's lin-log response (the latter
-is configs/sim_realistic.yaml's choice); the lin-log / log frame-rate ratios are printed last. Each (config, threads) cell is run `--repeats` times, alternating cells so
+is configs/sensors/realistic.yaml's choice); the lin-log / log frame-rate ratios are printed last. Each (config, threads) cell is run `--repeats` times, alternating cells so
 machine stalls hit all of them alike; the table shows medians. Time covers `EventSimulator.push`
 (validation, log response, every enabled stage, sorted EVENT_DTYPE output), not frame generation.
 

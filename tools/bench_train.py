@@ -4,7 +4,7 @@
                                     [--gaussians 20000] [--iters 12] [--threads 1] [--against REV]
                                     [--precisions auto float32 bfloat16]
 
-Each method runs its quick-bench config (configs/recon/bench/) with N initial Gaussians and the
+Each method runs its leaderboard recipe (configs/recipes/<method>/quick.yaml) with N initial Gaussians and the
 deformation on, in two states:
 - early: the method's random initial model (a haze whose footprints cover the image: the slowest
   part of training for the rasterizer);
@@ -42,8 +42,10 @@ from pathlib import Path
 from tools.tool_cli import int_in, nonnegative_int, positive_int, run_tool
 
 PARTS = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd")
-CONFIGS = {"d3dgs": "configs/recon/bench/d3dgs_quick.yaml", "e4dgs": "configs/recon/bench/e4dgs_quick.yaml",
-           "e4dgs_rgb": "configs/recon/bench/e4dgs_quick.yaml"}
+CONFIGS = {"d3dgs": "configs/recipes/d3dgs/quick.yaml", "e4dgs": "configs/recipes/e4dgs/quick.yaml",
+           "e4dgs_rgb": "configs/recipes/e4dgs/quick.yaml"}
+OLD_CONFIGS = {"d3dgs": "configs/recon/bench/d3dgs_quick.yaml", "e4dgs": "configs/recon/bench/e4dgs_quick.yaml",
+               "e4dgs_rgb": "configs/recon/bench/e4dgs_quick.yaml"}    # a tree from before 0.2 (--against)
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -152,7 +154,8 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str, extra: 
     overrides = {"train.init.n_points_object": n, "train.init.n_points_room": n, "train.init.kind": "auto",
                  **({"rgb_samples": 2} if method == "e4dgs_rgb" else {}),
                  **(extra or {})}
-    cfg = recon.resolve_config(method, str(REPO_OF_TREE / CONFIGS[method]), overrides=overrides)
+    path = REPO_OF_TREE / CONFIGS[method]
+    cfg = recon.resolve_config(method, str(path if path.is_file() else REPO_OF_TREE / OLD_CONFIGS[method]), overrides=overrides)
     ds = SceneDataset(scene)
     trainer = Trainer(get_method(method)(ds, cfg), out, progress=False)
     trainer.setup()

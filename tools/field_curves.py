@@ -2,7 +2,7 @@
 moving-pixel PSNR of each snapshot against training seconds.
 
     python -m tools.field_curves --scene data/quick/hinge --method e4dgs \\
-        --config configs/recon/bench/e4dgs_quick.yaml [--fields mlp trajectory] [--scale 1] [--set KEY=VALUE]
+        --config configs/recipes/e4dgs/quick.yaml [--fields mlp trajectory] [--scale 1] [--set KEY=VALUE]
 
 Each field trains the same config (`train.deform_field.kind` set, `train.iterations` x --scale with
 the schedule scaled along, snapshots at 10 / 25 / 50 / 75 / 100 %) into --out/<method>_<field>; the

@@ -1,6 +1,6 @@
 """The viewer of a bare event file (a recording `e4dgs import` wrote, or any of the toolkit's .h5): the
 stream on a time line that starts at its first event, wherever that is (Unix-epoch microseconds
-included), and the events of a window before the slider's time drawn as `e4dgs view` draws them.
+included), and the events of a window before the slider's time drawn as `e4dgs draw-events` draws them.
 
     v = EventStreamViewer("recording.h5", port=0); print(v.url); ...; v.stop()
 """

@@ -415,7 +415,23 @@ def test_bench_help_lists_every_shipped_preset(capsys):
     with pytest.raises(SystemExit):
         main(["bench", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "quick | paper | paper_gpu | tiny, or a bench YAML file" in text
+    assert "quick | paper | tiny, or a bench YAML file" in text
+
+
+def test_the_old_gpu_preset_is_the_paper_preset_with_every_cell_on_cuda():
+    """paper_gpu.yaml copied paper.yaml; it is now `--preset paper --set train.device=cuda --set
+    train.backend=gsplat`, and the old name keeps working until 0.3 with a deprecation line."""
+    from benchmark.config import load_bench
+    from common.config_files import DeprecatedName
+
+    with pytest.warns(DeprecatedName, match="--preset paper --set train.device=cuda --set train.backend=gsplat"):
+        old = load_bench("paper_gpu")
+    new = load_bench("paper", {"train.device": "cuda", "train.backend": "gsplat"})
+    assert old == new and old.scenes == load_bench("paper").scenes
+    for name, cell in new.cells.items():
+        assert cell.overrides["train.device"] == "cuda" and cell.overrides["train.backend"] == "gsplat", name
+        assert {k: v for k, v in cell.overrides.items() if not k.startswith("train.")} == \
+            {k: v for k, v in load_bench("paper").cells[name].overrides.items() if not k.startswith("train.")}
 
 
 @pytest.mark.parametrize("cell", ["d3dgs_sharp", "e2vid_d3dgs"])
@@ -465,7 +481,7 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
     cached.__set_name__(Job, "_config_hash")
     monkeypatch.setattr(Job, "_config_hash", cached)
     spec = (CellSpec("d3dgs", overrides={**TINY_TRAIN, "frames": "sharp"}) if cell == "d3dgs_sharp" else
-            CellSpec("e2vid_d3dgs", config="configs/recon/bench/e2vid_d3dgs_quick.yaml",
+            CellSpec("e2vid_d3dgs", config="e2vid_d3dgs/quick",
                      overrides={**TINY_TRAIN, "train.coarse_to_fine.factors": [], "train.coarse_to_fine.until": []}))
     cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name], "cells": {cell: spec}})
     rows = run_bench(cfg, "tiny", motion_scene.parent, tmp_path / "runs", studies=("main",), progress=False,
@@ -473,7 +489,7 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
     assert [r["cell"] for r in rows] == [cell] and rows[0].get("status") != "failed", rows[0].get("error")
     # manifest.json twice: the job's identity digests the scene's content before it trains, then the scene opens;
     # the recipe file (E2VID + D3DGS's) once, where its config is resolved
-    recipe = {"e2vid_d3dgs_quick.yaml": 1} if cell == "e2vid_d3dgs" else {}
+    recipe = {"quick.yaml": 1} if cell == "e2vid_d3dgs" else {}
     assert counts == {"resolve_config": 1, "SceneDataset": 1, "config_hash": 1, "manifest.json": 2,
                       "scene.yaml": 1, "cameras.json": 1, **recipe}, counts
     counts.clear()                       # the report step reads rows, not recipe files or scenes

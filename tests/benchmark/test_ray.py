@@ -250,7 +250,7 @@ def test_the_commands_take_ray(motion_scene, tmp_path, local_ray, capsys):
                                                 for c, s in _grid(motion_scene).cells.items()}}))
     out = tmp_path / "runs"
     assert main(["bench", "--preset", str(preset), "--data", str(motion_scene.parent), "--out", str(out),
-                 "--studies", "main", "--methods", "e4dgs", "--ray", "--ray-retries", "0", "--no-progress"]) == 0
+                 "--studies", "main", "--cells", "e4dgs", "--ray", "--ray-retries", "0", "--no-progress"]) == 0
     rows = read_results(out / "results.jsonl")
     assert [r["cell"] for r in rows] == ["e4dgs"] and rows[0]["psnr"] > 0
     assert "E-4DGS (events)" in (out / "leaderboard.md").read_text()

@@ -61,7 +61,7 @@ def test_score_cli_appends_external_rows_and_the_leaderboard_shows_them(benched,
         render_test_views(load(out / rows["e4dgs"]["run_dir"]), motion_scene, renders / motion_scene.name / seconds, "png")
     results = tmp_path / "results.jsonl"
     results.write_text("".join(json.dumps(r) + "\n" for r in rows.values()))
-    assert e4dgs(["score", "--data", str(motion_scene.parent), "--renders", str(renders), "--name", "mine",
+    assert e4dgs(["score", "--data", str(motion_scene.parent), str(renders), "--name", "mine",
                   "--label", "My method (events)", "--inputs", "events", "--train-seconds", "5", "--lpips", "none",
                   "--out", str(tmp_path)]) == 0
     stored = {r["key"]: r for r in read_results(results)}
@@ -72,7 +72,7 @@ def test_score_cli_appends_external_rows_and_the_leaderboard_shows_them(benched,
     board = (tmp_path / "leaderboard.md").read_text()
     assert "| My method (events) |" in board and "Scored from outside renders" in board
     # scoring again replaces its rows instead of adding more
-    assert e4dgs(["score", "--data", str(motion_scene.parent), "--renders", str(renders), "--name", "mine",
+    assert e4dgs(["score", "--data", str(motion_scene.parent), str(renders), "--name", "mine",
                   "--inputs", "events", "--lpips", "none", "--out", str(tmp_path)]) == 0
     assert len(read_results(results)) == 3
 
@@ -202,7 +202,7 @@ def test_bad_renders_are_refused_in_one_line_and_nothing_is_appended(motion_scen
     before = results.read_bytes()
     words, name = _break(kind, scene)
     capsys.readouterr()
-    rc = e4dgs(["score", "--data", str(motion_scene.parent), "--renders", str(tmp_path / "renders"), "--name", "m",
+    rc = e4dgs(["score", "--data", str(motion_scene.parent), str(tmp_path / "renders"), "--name", "m",
                 "--inputs", "rgb", "--lpips", "none", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err.strip()
     assert rc == 1 and len(err.splitlines()) == 1 and words in err and name in err, err
@@ -212,12 +212,12 @@ def test_bad_renders_are_refused_in_one_line_and_nothing_is_appended(motion_scen
 def test_gray_renders_of_an_events_only_method_are_accepted_and_a_clashing_name_is_refused(benched, motion_scene, tmp_path, capsys):
     out, _ = benched
     _good(motion_scene, tmp_path / "renders", channels=1)
-    assert e4dgs(["score", "--data", str(motion_scene.parent), "--renders", str(tmp_path / "renders"), "--name", "gt",
+    assert e4dgs(["score", "--data", str(motion_scene.parent), str(tmp_path / "renders"), "--name", "gt",
                   "--inputs", "events", "--lpips", "none", "--out", str(tmp_path / "o")]) == 0
     (row,) = read_results(tmp_path / "o" / "results.jsonl")
     assert row["psnr"] == 100.0                 # the ground truth itself, after the gain / offset fit: exact
     (out / "bench.json").write_text(json.dumps({"preset": "quick"}))
     capsys.readouterr()
-    assert e4dgs(["score", "--data", str(motion_scene.parent), "--renders", str(tmp_path / "renders"), "--name", "e4dgs",
+    assert e4dgs(["score", "--data", str(motion_scene.parent), str(tmp_path / "renders"), "--name", "e4dgs",
                   "--inputs", "events", "--lpips", "none", "--out", str(out)]) == 1
     assert "'e4dgs' is a cell of the preset" in capsys.readouterr().err

@@ -162,7 +162,7 @@ def test_speed_study_end_to_end_on_the_tiny_scene(tmp_path):
 
     root = Path(__file__).resolve().parents[2]
     preset = tmp_path / "tiny_speed.yaml"
-    preset.write_text((root / "configs" / "dataset_tiny_motion.yaml").read_text()
+    preset.write_text((root / "tests" / "fixtures" / "configs" / "datasets" / "tiny_motion.yaml").read_text()
                       + "  speeds: {factors: [1, 3], exposure_ms: 1.0, max_px_per_frame: 10.0}\n")
     data = tmp_path / "data"
     r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(preset),

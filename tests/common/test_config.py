@@ -79,11 +79,11 @@ def test_dump_then_load_round_trip(tmp_path):
 def test_shipped_simulator_configs_load():
     from pathlib import Path
 
-    files = sorted((Path(__file__).resolve().parents[2] / "configs").glob("sim_*.yaml"))
+    files = sorted((Path(__file__).resolve().parents[2] / "configs" / "sensors").glob("*.yaml"))
     assert len(files) >= 2
     for f in files:
         load_config(SimulatorConfig, f)
-    assert load_config(SimulatorConfig, files[0].with_name("sim_ideal.yaml")) == SimulatorConfig()
+    assert load_config(SimulatorConfig, files[0].with_name("ideal.yaml")) == SimulatorConfig()
 
 
 def test_yaml_merge_keys_work_and_duplicates_are_still_refused(tmp_path):

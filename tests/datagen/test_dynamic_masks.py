@@ -74,7 +74,7 @@ def test_region_scores_see_only_the_masked_pixels(rng):
 
 def _generate(out: Path, yaml: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", yaml.stem, "--preset",
-                           str(ROOT / "configs" / "dataset_paper.yaml"), "--out", str(out), "--no-progress",
+                           str(ROOT / "configs" / "datasets" / "paper.yaml"), "--out", str(out), "--no-progress",
                            "--scene-config", str(yaml)], capture_output=True, text=True, cwd=ROOT)
 
 

@@ -116,7 +116,7 @@ def test_blur_length_of_a_sliding_board_is_the_analytic_one(tmp_path):
     from scene_format.cameras import intrinsics_from_fov
 
     yaml_path = ROOT / "blender_scenes" / "blur_plane.yaml"
-    r = generate(tmp_path, scene="blur_plane", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+    r = generate(tmp_path, scene="blur_plane", preset=str(ROOT / "configs" / "datasets" / "paper.yaml"),
                  extra=["--scene-config", str(yaml_path)])
     assert r.returncode == 0, r.stderr
     cfg = resolve_scene("blur_plane", scene_file=yaml_path)
@@ -139,7 +139,7 @@ def test_blur_of_a_board_moved_by_a_shape_key_equals_the_rigid_boards(tmp_path):
     figure equals the rigidly moved board's, and every pixel is dynamic."""
     figures = {}
     for name in ("blur_plane", "blur_plane_deform"):
-        r = generate(tmp_path, scene=name, preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+        r = generate(tmp_path, scene=name, preset=str(ROOT / "configs" / "datasets" / "paper.yaml"),
                      extra=["--scene-config", str(ROOT / "blender_scenes" / f"{name}.yaml")])
         assert r.returncode == 0, r.stderr
         m = json.loads((tmp_path / name / "manifest.json").read_text())
@@ -154,7 +154,7 @@ def test_blur_of_a_board_moved_by_a_shape_key_equals_the_rigid_boards(tmp_path):
 
 
 def test_a_mesh_whose_topology_changes_is_refused_naming_it_and_nothing_is_written(tmp_path):
-    r = generate(tmp_path / "out", scene="blur_plane_topology", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+    r = generate(tmp_path / "out", scene="blur_plane_topology", preset=str(ROOT / "configs" / "datasets" / "paper.yaml"),
                  extra=["--scene-config", str(ROOT / "blender_scenes" / "blur_plane_topology.yaml")])
     assert r.returncode != 0
     line = r.stderr.strip().splitlines()[-1]
@@ -165,7 +165,7 @@ def test_a_mesh_whose_topology_changes_is_refused_naming_it_and_nothing_is_writt
 def test_a_blur_level_out_of_reach_is_refused_and_writes_nothing(tmp_path):
     bad = tmp_path / "plane.yaml"
     bad.write_text((ROOT / "blender_scenes" / "blur_plane.yaml").read_text().replace("strong: 9.0", "strong: 90.0"))
-    r = generate(tmp_path / "out", scene="blur_plane", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+    r = generate(tmp_path / "out", scene="blur_plane", preset=str(ROOT / "configs" / "datasets" / "paper.yaml"),
                  extra=["--scene-config", str(bad)])
     assert r.returncode == 2, r.stderr
     assert "scene blur_plane, blur level strong: target 90 px cannot be reached" in r.stderr
@@ -175,7 +175,7 @@ def test_a_blur_level_out_of_reach_is_refused_and_writes_nothing(tmp_path):
 def test_cameras_project_world_points_where_blender_draws_them(tmp_path):
     from blender_scenes.calibration import MARKERS
 
-    r = generate(tmp_path, scene="calibration", preset=str(ROOT / "configs" / "dataset_paper.yaml"),
+    r = generate(tmp_path, scene="calibration", preset=str(ROOT / "configs" / "datasets" / "paper.yaml"),
                  extra=["--scene-config", str(ROOT / "blender_scenes" / "calibration.yaml")])
     assert r.returncode == 0, r.stderr
     d = tmp_path / "calibration"
@@ -437,7 +437,7 @@ def test_a_preset_asking_for_formats_writes_them_beside_the_hdf5_and_check_verif
     from eventio.formats import read_recording, same_events
 
     plain = tmp_path / "plain.yaml"
-    plain.write_text((ROOT / "configs" / "dataset_tiny.yaml").read_text())
+    plain.write_text((ROOT / "configs" / "datasets" / "tiny.yaml").read_text())
     assert generate(tmp_path / "d", preset=str(plain)).returncode == 0
     scene = tmp_path / "d" / "cubes"
     before = json.loads((scene / "manifest.json").read_text())

@@ -16,7 +16,7 @@ from scene_format.naming import split_variant, variant_name
 from eventio.h5io import read_events
 
 ROOT = Path(__file__).resolve().parents[2]
-PAPER = str(ROOT / "configs" / "dataset_paper.yaml")
+PAPER = str(ROOT / "configs" / "datasets" / "paper.yaml")
 
 
 def generate(out, scene, preset, extra=()):
@@ -96,7 +96,7 @@ def test_ideal_sensor_events_of_speed_s_are_speed_1_events_with_time_divided_by_
     """No time constant in the sensor: compressing time compresses the event times and changes nothing
     else (same pixels, polarities and order; times equal to t / s up to the whole-microsecond rounding)."""
     preset = tmp_path / "p.yaml"
-    preset.write_text((ROOT / "configs" / "dataset_tiny.yaml").read_text()
+    preset.write_text((ROOT / "configs" / "datasets" / "tiny.yaml").read_text()
                       + "  speeds: {factors: [1, 4, 7.5], exposure_ms: 0.3333, max_px_per_frame: 10.0}\n")
     r = generate(tmp_path / "out", "cubes", str(preset))
     assert r.returncode == 0, r.stderr

@@ -382,12 +382,12 @@ def test_e2vid_cli_writes_frames(motion_scene, tmp_path):
     from e4dgs.cli import main
 
     out = tmp_path / "video"
-    assert main(["e2vid", "--events", str(motion_scene / "events" / "cam0.h5"), "--out", str(out), "--dt-ms", "5"]) == 0
+    assert main(["e2vid", str(motion_scene / "events" / "cam0.h5"), "--out", str(out), "--dt-ms", "5"]) == 0
     times = [int(t) for t in (out / "timestamps.txt").read_text().split()]
     pngs = sorted(out.glob("*.png"))
     assert len(pngs) == len(times) >= 3 and times == sorted(times)
     with pytest.raises(SystemExit, match="nope.h5"):
-        main(["e2vid", "--events", str(tmp_path / "nope.h5"), "--out", str(out)])
+        main(["e2vid", str(tmp_path / "nope.h5"), "--out", str(out)])
 
 
 def test_weights_report_lists_the_curve_and_heldout_numbers():
@@ -436,10 +436,10 @@ def test_e2vid_refuses_steps_below_a_microsecond_and_warns_before_long_runs(moti
     for args, words in ((["--dt-ms", "0.0001"], "below the event timestamps' resolution of 1 us"),
                         (["--events-per-window", "1"], "at least 100 events")):
         with pytest.raises(SystemExit, match=words):
-            main(["e2vid", "--events", ev, "--out", str(tmp_path / "v"), *args])
+            main(["e2vid", ev, "--out", str(tmp_path / "v"), *args])
         assert not (tmp_path / "v").exists()
     monkeypatch.setattr(e2vid.cli, "LONG_RUN_WINDOWS", 30)      # the real bound is 2,000 windows
-    assert main(["e2vid", "--events", ev, "--out", str(tmp_path / "w"), "--dt-ms", "0.5"]) == 0
+    assert main(["e2vid", ev, "--out", str(tmp_path / "w"), "--dt-ms", "0.5"]) == 0
     err = capsys.readouterr().err
     n = len((tmp_path / "w" / "timestamps.txt").read_text().split())
     assert f"warning: {n:,} windows, about" in err and "ms each" in err and n > 30

@@ -157,9 +157,9 @@ def assert_clean_failure(run: Run, pattern: str, root: Path, before: set[Path], 
 
 
 CONSUMERS = {
-    "view-png": lambda ev, out: ["view", ev, "--out", out / "v.png"],
-    "view-mp4": lambda ev, out: ["view", ev, "--out", out / "v.mp4", "--window", "1ms"],
-    "e2vid": lambda ev, out: ["e2vid", "--events", ev, "--out", out / "frames"],
+    "view-png": lambda ev, out: ["draw-events", ev, "--out", out / "v.png"],
+    "view-mp4": lambda ev, out: ["draw-events", ev, "--out", out / "v.mp4", "--window", "1ms"],
+    "e2vid": lambda ev, out: ["e2vid", ev, "--out", out / "frames"],
 }
 
 
@@ -177,9 +177,9 @@ def test_missing_and_foreign_event_files(tmp_path, capsys):
     text = tmp_path / "notes.h5"
     text.write_text("not hdf5")
     before = files_under(tmp_path)
-    assert_clean_failure(run_cli(["view", tmp_path / "none.h5", "--out", tmp_path / "v.png"], capsys),
+    assert_clean_failure(run_cli(["draw-events", tmp_path / "none.h5", "--out", tmp_path / "v.png"], capsys),
                          "none.h5: no such event file", tmp_path, before)
-    assert_clean_failure(run_cli(["e2vid", "--events", text, "--out", tmp_path / "f"], capsys),
+    assert_clean_failure(run_cli(["e2vid", text, "--out", tmp_path / "f"], capsys),
                          "notes.h5: not a readable HDF5 file", tmp_path, before)
 
 
@@ -189,7 +189,7 @@ def test_training_refuses_a_scene_with_shuffled_events(motion_scene, tmp_path, c
     rewrite(scene / "events" / "cam0.h5", scene / "events" / "cam0.h5.new", shuffled_t)
     os.replace(scene / "events" / "cam0.h5.new", scene / "events" / "cam0.h5")
     before = files_under(tmp_path)
-    r = run_cli(["train", "--scene", scene, "--method", "e4dgs", "--out", tmp_path / "run", "--no-progress",
+    r = run_cli(["train", scene, "--method", "e4dgs", "--out", tmp_path / "run", "--no-progress",
                  "--set", "train.iterations=2"], capsys)
     assert_clean_failure(r, "cam0.h5: events/t: .*not sorted", tmp_path, before)
     r = run_cli(["check", scene], capsys)
@@ -220,7 +220,7 @@ def frames_dir(tmp_path) -> Path:
 
 
 def _sim(frames, out, *extra):
-    return ["simulate", "--frames", frames, "--out", out, *extra]
+    return ["simulate", frames, "--out", out, *extra]
 
 
 SIMULATE_CASES = [
@@ -343,19 +343,19 @@ def test_sigma_far_beyond_the_threshold_warns(frames_dir, tmp_path, capsys):
 
 
 E2VID_VIEW_CASES = [
-    ("e2vid-dt-negative", lambda ev, o: ["e2vid", "--events", ev, "--out", o / "f", "--dt-ms", "-1"], 2,
+    ("e2vid-dt-negative", lambda ev, o: ["e2vid", ev, "--out", o / "f", "--dt-ms", "-1"], 2,
      "argument --dt-ms: expected a positive number"),
-    ("e2vid-dt-zero", lambda ev, o: ["e2vid", "--events", ev, "--out", o / "f", "--dt-ms", "0"], 2,
+    ("e2vid-dt-zero", lambda ev, o: ["e2vid", ev, "--out", o / "f", "--dt-ms", "0"], 2,
      "argument --dt-ms: expected a positive number"),
-    ("e2vid-window-negative", lambda ev, o: ["e2vid", "--events", ev, "--out", o / "f", "--events-per-window", "-5"],
+    ("e2vid-window-negative", lambda ev, o: ["e2vid", ev, "--out", o / "f", "--events-per-window", "-5"],
      2, "argument --events-per-window: expected an integer in 0 .. 1,000,000,000"),
-    ("e2vid-weights-missing", lambda ev, o: ["e2vid", "--events", ev, "--out", o / "f", "--weights", o / "w.pth"], 1,
+    ("e2vid-weights-missing", lambda ev, o: ["e2vid", ev, "--out", o / "f", "--weights", o / "w.pth"], 1,
      "w.pth"),
-    ("view-t1-before-t0", lambda ev, o: ["view", ev, "--out", o / "v.png", "--t0", "5ms", "--t1", "1ms"], 1,
+    ("view-t1-before-t0", lambda ev, o: ["draw-events", ev, "--out", o / "v.png", "--t0", "5ms", "--t1", "1ms"], 1,
      "--t1 .* must be after --t0"),
-    ("view-bad-suffix", lambda ev, o: ["view", ev, "--out", o / "v.gif"], 1, "v.gif: expected a .png or .mp4"),
-    ("view-bad-time", lambda ev, o: ["view", ev, "--out", o / "v.png", "--t0", "soon"], 1, "soon"),
-    ("view-fps-zero", lambda ev, o: ["view", ev, "--out", o / "v.mp4", "--fps", "0"], 2,
+    ("view-bad-suffix", lambda ev, o: ["draw-events", ev, "--out", o / "v.gif"], 1, "v.gif: expected a .png or .mp4"),
+    ("view-bad-time", lambda ev, o: ["draw-events", ev, "--out", o / "v.png", "--t0", "soon"], 1, "soon"),
+    ("view-fps-zero", lambda ev, o: ["draw-events", ev, "--out", o / "v.mp4", "--fps", "0"], 2,
      "argument --fps: expected a positive number"),
 ]
 
@@ -376,25 +376,25 @@ def _camera_json(path: Path, **fields) -> Path:
 
 
 TRAIN_CASES = [
-    ("lr-negative", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "train.lr.feature=-1"], 1, "lr.feature"),
-    ("unknown-key", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "train.iteratons=5"], 1,
+    ("lr-negative", lambda s, o: ["train", s, "--out", o, "--set", "train.lr.feature=-1"], 1, "lr.feature"),
+    ("unknown-key", lambda s, o: ["train", s, "--out", o, "--set", "train.iteratons=5"], 1,
      "train.iteratons: unknown key"),
-    ("set-bad-yaml", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "train.iterations=[1,"], 1,
+    ("set-bad-yaml", lambda s, o: ["train", s, "--out", o, "--set", "train.iterations=[1,"], 1,
      "--set train.iterations: the value '\\[1,' is not valid YAML"),
-    ("set-no-equals", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "train.iterations"], 1,
+    ("set-no-equals", lambda s, o: ["train", s, "--out", o, "--set", "train.iterations"], 1,
      "--set 'train.iterations': expected key=value"),
-    ("scene-missing", lambda s, o: ["train", "--scene", s.parent / "cubez", "--out", o], 1,
+    ("scene-missing", lambda s, o: ["train", s.parent / "cubez", "--out", o], 1,
      "cubez: no such scene folder"),
-    ("method-unknown", lambda s, o: ["train", "--scene", s, "--out", o, "--method", "nerf"], 1, "nerf.*e4dgs"),
-    ("config-missing", lambda s, o: ["train", "--scene", s, "--out", o, "--config", o.parent / "none.yaml"], 1,
+    ("method-unknown", lambda s, o: ["train", s, "--out", o, "--method", "nerf"], 1, "nerf.*e4dgs"),
+    ("config-missing", lambda s, o: ["train", s, "--out", o, "--config", o.parent / "none.yaml"], 1,
      "none.yaml: cannot read config file"),
-    ("device-unknown", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "train.device=gpu"], 1,
+    ("device-unknown", lambda s, o: ["train", s, "--out", o, "--set", "train.device=gpu"], 1,
      "device: expected auto, cpu, cuda or cuda:N"),
-    ("gsplat-on-cpu", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "train.backend=gsplat",
+    ("gsplat-on-cpu", lambda s, o: ["train", s, "--out", o, "--set", "train.backend=gsplat",
                                     "--set", "train.device=cpu"], 1, "train.backend: .*'gsplat' renders CUDA tensors"),
-    ("blur-level-unknown", lambda s, o: ["train", "--scene", s, "--out", o, "--set", "frames=extreme"], 1,
+    ("blur-level-unknown", lambda s, o: ["train", s, "--out", o, "--set", "frames=extreme"], 1,
      "no blur level 'extreme'"),
-    ("render-model-missing", lambda s, o: ["render", "--model", o / "none", "--camera", "0", "--t", "0",
+    ("render-model-missing", lambda s, o: ["render", o / "none", "--camera", "0", "--t", "0",
                                            "--out", o.parent / "r"], 1, "none: no such model file"),
 ]
 
@@ -409,7 +409,7 @@ def test_train_and_render_refuse_bad_input(name, argv, rc, pattern, motion_scene
 @pytest.fixture(scope="module")
 def tiny_model(motion_scene, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("model") / "run"
-    assert main(["train", "--scene", str(motion_scene), "--out", str(out), "--no-progress", "--set",
+    assert main(["train", str(motion_scene), "--out", str(out), "--no-progress", "--set",
                  "train.iterations=3", "--set", "train.init.n_points_object=200"]) == 0
     return out
 
@@ -428,12 +428,12 @@ RENDER_CAMERA_CASES = [
 def test_render_refuses_bad_camera_files(name, make, pattern, tiny_model, tmp_path, capsys):
     cam = make(tmp_path / "cam.json")
     before = files_under(tmp_path)
-    r = run_cli(["render", "--model", tiny_model, "--camera", cam, "--t", "0", "--out", tmp_path / "r"], capsys)
+    r = run_cli(["render", tiny_model, "--camera", cam, "--t", "0", "--out", tmp_path / "r"], capsys)
     assert_clean_failure(r, pattern, tmp_path, before, 1)
 
 
 def test_render_refuses_times_outside_the_clip(tiny_model, tmp_path, capsys):
-    r = run_cli(["render", "--model", tiny_model, "--camera", "0", "--t", "1.5", "--out", tmp_path / "r"], capsys)
+    r = run_cli(["render", tiny_model, "--camera", "0", "--t", "1.5", "--out", tmp_path / "r"], capsys)
     assert_clean_failure(r, "argument --t: expected a number in 0 .. 1 \\(a normalised time\\)", tmp_path, set(), 2)
 
 
@@ -469,7 +469,7 @@ def test_a_second_training_into_the_same_folder_is_refused(motion_scene, tmp_pat
     out = tmp_path / "run"
     with output_lock(out):
         before = files_under(tmp_path)
-        r = run_cli(["train", "--scene", motion_scene, "--out", out, "--no-progress", "--set", "train.iterations=2"],
+        r = run_cli(["train", motion_scene, "--out", out, "--no-progress", "--set", "train.iterations=2"],
                     capsys)
         assert_clean_failure(r, f"run: another run \\(pid {os.getpid()}\\) is writing this output", tmp_path, before, 1)
     assert not (tmp_path / ".run.lock").exists()

@@ -43,7 +43,7 @@ def frames(tmp_path):
 def test_simulate_never_writes_a_sibling_output_over_its_timestamps(frames, tmp_path, capsys):
     ts = tmp_path / "ts.txt"
     ts.write_text("0\n1000\n2000\n3000\n")
-    rc, err = run(["simulate", "--frames", frames, "--timestamps", ts, "--out", tmp_path / "ts.h5", "--format", "txt"], capsys)
+    rc, err = run(["simulate", frames, "--timestamps", ts, "--out", tmp_path / "ts.h5", "--format", "txt"], capsys)
     assert rc == 1 and "--format txt (written beside --out)" in err and "is also --timestamps" in err
     assert ts.read_text() == "0\n1000\n2000\n3000\n" and not (tmp_path / "ts.h5").exists()
 
@@ -51,10 +51,10 @@ def test_simulate_never_writes_a_sibling_output_over_its_timestamps(frames, tmp_
 @pytest.mark.parametrize("argv", [
     lambda d: ["import", d / "rec.h5", "--out", d / "rec.h5"],
     lambda d: ["export", d / "rec.h5", "--format", "h5", "--out", d / "rec.h5"],
-    lambda d: ["view", d / "rec.h5", "--out", d / "rec.h5"],
-    lambda d: ["simulate", "--frames", d / "frames", "--fps", "1000", "--out", d / "cfg.h5", "--format", "txt",
+    lambda d: ["draw-events", d / "rec.h5", "--out", d / "rec.h5"],
+    lambda d: ["simulate", d / "frames", "--fps", "1000", "--out", d / "cfg.h5", "--format", "txt",
                "--config", d / "cfg.txt"],
-    lambda d: ["e2vid", "--events", d / "rec.h5", "--out", d / "rec.h5"],
+    lambda d: ["e2vid", d / "rec.h5", "--out", d / "rec.h5"],
 ], ids=["import", "export", "view", "simulate-config", "e2vid"])
 def test_an_output_on_an_input_is_refused_before_any_work(argv, frames, tmp_path, capsys):
     write_events(tmp_path / "rec.h5", stream(100))
@@ -67,7 +67,7 @@ def test_an_output_on_an_input_is_refused_before_any_work(argv, frames, tmp_path
 
 def test_simulate_refuses_an_existing_ros2_bag_before_writing_anything(frames, tmp_path, capsys):
     (tmp_path / "ev_rosbag2").mkdir()
-    rc, err = run(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "ev.h5", "--format", "rosbag2"],
+    rc, err = run(["simulate", frames, "--fps", "1000", "--out", tmp_path / "ev.h5", "--format", "rosbag2"],
                   capsys)
     assert rc == 1 and "ev_rosbag2 exists" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev_rosbag2", "frames"]
@@ -98,7 +98,7 @@ def test_a_full_disk_under_import_simulate_and_view(frames, small_disk, tmp_path
     src = write_events(tmp_path / "big.h5", stream(300_000))
     rc, err = run(["import", src, "--out", small_disk / "y.h5"], capsys)
     assert rc == 1 and f"{small_disk / 'y.h5'}: No space left on device" in err
-    rc, err = run(["view", src, "--out", small_disk / "v.mp4", "--window", "2ms", "--scale", "4"], capsys)
+    rc, err = run(["draw-events", src, "--out", small_disk / "v.mp4", "--window", "2ms", "--scale", "4"], capsys)
     assert rc == 1 and f"{small_disk / 'v.mp4'}: No space left on device" in err, err
     assert list(small_disk.iterdir()) == []
     big = tmp_path / "bigframes"
@@ -106,7 +106,7 @@ def test_a_full_disk_under_import_simulate_and_view(frames, small_disk, tmp_path
     rng = np.random.default_rng(1)
     for k in range(30):
         cv2.imwrite(str(big / f"{k:03d}.png"), rng.integers(0, 255, (260, 346, 3), dtype=np.uint8))
-    rc, err = run(["simulate", "--frames", big, "--fps", "1000", "--out", small_disk / "s.h5"], capsys)
+    rc, err = run(["simulate", big, "--fps", "1000", "--out", small_disk / "s.h5"], capsys)
     assert rc == 1 and "No space left on device" in err and str(small_disk) in err, err
 
 
@@ -170,9 +170,9 @@ def test_sizes_beyond_their_meaning_or_the_machine_are_refused_before_a_file_is_
     from recon import memory
 
     out = tmp_path / "run"
-    rc, err = run(["train", "--scene", motion_scene, "--out", out, "--set", "train.deform_field.fourier=1000000"], capsys)
+    rc, err = run(["train", motion_scene, "--out", out, "--set", "train.deform_field.fourier=1000000"], capsys)
     assert rc == 1 and "fourier: expected 0 .. 64" in err and not out.exists(), err
-    rc, err = run(["train", "--scene", motion_scene, "--out", out, "--set", "train.iterations=1000000000000"], capsys)
+    rc, err = run(["train", motion_scene, "--out", out, "--set", "train.iterations=1000000000000"], capsys)
     assert rc == 1 and "iterations: expected 1 .. 1e+07" in err and not out.exists(), err
     # within every range, but more than this machine has: the estimate names the field to lower
     big = {"train.init.n_points_object": 10_000_000, "train.densify.max_gaussians": 20_000_000}
@@ -218,21 +218,21 @@ def test_a_model_is_not_rendered_on_another_scenes_test_views(motion_scene, tmp_
     import shutil
 
     run_dir = tmp_path / "run"
-    assert main(["train", "--scene", str(motion_scene), "--out", str(run_dir), "--set", "train.iterations=2",
+    assert main(["train", str(motion_scene), "--out", str(run_dir), "--set", "train.iterations=2",
                  "--set", "train.init.n_points_object=200"]) == 0
     other = tmp_path / "other"
     shutil.copytree(motion_scene, other)
     text = (other / "scene.yaml").read_text()
     (other / "scene.yaml").write_text(text.replace(f"name: {motion_scene.name}", "name: other", 1))
     capsys.readouterr()
-    rc, err = run(["render", "--model", run_dir, "--test-views", other, "--out", tmp_path / "renders"], capsys)
+    rc, err = run(["render", run_dir, "--test-views", other, "--out", tmp_path / "renders"], capsys)
     assert rc == 1 and f"trained on scene '{motion_scene.name}', these are the views of 'other'" in err, err
     assert not (tmp_path / "renders").exists()
 
 
 def test_a_full_disk_under_train_names_the_file_torch_could_not_write(motion_scene, small_disk, capsys):
     """torch.save on a full disk said '[enforce fail at inline_container.cc:672] . unexpected pos ...'."""
-    rc, err = run(["train", "--scene", motion_scene, "--out", small_disk / "run", "--set", "train.iterations=3",
+    rc, err = run(["train", motion_scene, "--out", small_disk / "run", "--set", "train.iterations=3",
                    "--set", "train.init.n_points_object=20000"], capsys)
     lines = [ln for ln in err.replace("\r", "\n").splitlines() if "error" in ln]
     assert rc == 1 and len(lines) == 1 and f"{small_disk / 'run'}" in lines[0] and "No space left on device" in lines[0], err

@@ -61,11 +61,11 @@ def frames(tmp_path) -> Path:
 
 def test_simulate_refuses_outputs_of_the_wrong_kind_or_inside_its_input(frames, tmp_path, capsys):
     for out, words in ((tmp_path / "wrong.png", "expected an event file name ending in .h5"),
-                       (frames / "events.h5", "lies inside --frames")):
-        rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", out], capsys)
+                       (frames / "events.h5", "lies inside FRAMES")):
+        rc, err = cli(["simulate", frames, "--fps", "1000", "--out", out], capsys)
         assert rc == 1 and words in err and not out.exists()
     (tmp_path / "adir.h5").mkdir()
-    rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "adir.h5"], capsys)
+    rc, err = cli(["simulate", frames, "--fps", "1000", "--out", tmp_path / "adir.h5"], capsys)
     assert rc == 1 and "is a folder" in err
 
 
@@ -74,12 +74,12 @@ def test_simulate_skips_hidden_files_refuses_doubled_frames_and_takes_negative_s
 
     (frames / "._frame_000.exr").write_bytes(b"\x00\x05\x16\x07 resource fork")      # a macOS copy's debris
     out = tmp_path / "ev.h5"
-    assert cli(["simulate", "--frames", frames, "--fps", "1000", "--t0", "-5ms", "--out", out], capsys)[0] == 0
+    assert cli(["simulate", frames, "--fps", "1000", "--t0", "-5ms", "--out", out], capsys)[0] == 0
     ev = read_events(out)
     assert ev.events["t"].min() >= -5000 and ev.events["t"].min() < 0
     import cv2
     cv2.imwrite(str(frames / "frame_003.png"), np.zeros((24, 32), np.uint8))
-    rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "b.h5"], capsys)
+    rc, err = cli(["simulate", frames, "--fps", "1000", "--out", tmp_path / "b.h5"], capsys)
     assert rc == 1 and "frame_003.exr and frame_003.png are the same frame in two formats" in err
 
 
@@ -89,20 +89,20 @@ def test_render_refuses_colliding_names_negative_indices_and_impossible_cameras(
     from recon.render import camera_from_pose
 
     model = tmp_path / "m"
-    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "train", "--scene", str(motion_scene), "--method", "d3dgs",
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "train", str(motion_scene), "--method", "d3dgs",
                         "--set", "train.iterations=3", "--set", "train.scale_schedule=false", "--set",
                         "train.densify.enabled=false", "--set", "train.init.n_points_object=50", "--out", str(model),
                         "--no-progress"], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-1500:]
-    rc, err = cli(["render", "--model", model, "--camera", "0", "--t", "0.5", "0.5000001", "--out", tmp_path / "r"],
+    rc, err = cli(["render", model, "--camera", "0", "--t", "0.5", "0.5000001", "--out", tmp_path / "r"],
                   capsys)
     assert rc == 1 and "two times give the same file name" in err and not (tmp_path / "r").exists()
-    rc, err = cli(["render", "--model", model, "--camera=-1", "--t", "0.5", "--out", tmp_path / "r"], capsys)
+    rc, err = cli(["render", model, "--camera=-1", "--t", "0.5", "--out", tmp_path / "r"], capsys)
     assert rc == 1 and "a camera index is >= 0" in err
     cam = tmp_path / "cam.json"
     cam.write_text(json.dumps({"K": [[0, 0, 32], [0, 40, 24], [0, 0, 1]], "c2w_opencv": np.eye(4).tolist(),
                                "width": 64, "height": 48}))
-    rc, err = cli(["render", "--model", model, "--camera", cam, "--t", "0.5", "--out", tmp_path / "r"], capsys)
+    rc, err = cli(["render", model, "--camera", cam, "--t", "0.5", "--out", tmp_path / "r"], capsys)
     assert rc == 1 and str(cam) in err and "positive fx, fy" in err
     bad_pose = np.eye(4)
     bad_pose[0, 3] = np.nan
@@ -169,7 +169,7 @@ def test_view_shows_every_event_of_a_file_that_records_no_end(tmp_path, capsys):
     with h5py.File(path, "r+") as f:
         for key in [k for k in f.attrs if k == "t_end_us"]:
             del f.attrs[key]
-    rc, err = cli(["view", path, "--out", tmp_path / "v.png", "--plain"], capsys)
+    rc, err = cli(["draw-events", path, "--out", tmp_path / "v.png", "--plain"], capsys)
     assert rc == 0, err
     img = cv2.imread(str(tmp_path / "v.png"))
     assert int(np.sum(img.min(axis=-1) < 255)) == 3
@@ -294,11 +294,11 @@ def test_event_files_whose_attributes_disagree_with_their_events_are_refused(tmp
                                ("n_events", 2, "n_events = 2 but the file holds 3 events")):
         path = tmp_path / f"{attr}.h5"
         write_events(path, EventStream(make_events([0, 400, 900], [1, 2, 3], [1, 1, 1], [1, -1, 1]), 8, 4))
-        rc, err = cli(["view", path, "--out", tmp_path / f"{attr}_ok.png"], capsys)
+        rc, err = cli(["draw-events", path, "--out", tmp_path / f"{attr}_ok.png"], capsys)
         assert rc == 0, err                                      # as written, the file is consistent
         with h5py.File(path, "r+") as f:
             f.attrs[attr] = value
-        rc, err = cli(["view", path, "--out", tmp_path / f"{attr}.png"], capsys)
+        rc, err = cli(["draw-events", path, "--out", tmp_path / f"{attr}.png"], capsys)
         assert rc == 1 and words in err and str(path) in err and not (tmp_path / f"{attr}.png").exists()
 
 
@@ -331,15 +331,15 @@ def test_model_and_weight_files_torch_cannot_read_get_one_short_line(tmp_path, c
         msg = str(info.value)
         assert msg.startswith(f"{f}: cannot read it as a model file") and words in msg
         assert "weights_only" not in msg and "\n" not in msg and len(msg) < 300
-    rc, err = cli(["e2vid", "--events", motion_scene / "events" / "cam0.h5", "--out", tmp_path / "v",
+    rc, err = cli(["e2vid", motion_scene / "events" / "cam0.h5", "--out", tmp_path / "v",
                    "--weights", garbage], capsys)
     assert rc == 1 and "cannot read it as E2VID / FireNet weights" in err and "weights_only" not in err
     unfinished = tmp_path / "run"
     unfinished.mkdir()
     (unfinished / "checkpoint.pt").write_bytes(b"")
-    rc, err = cli(["render", "--model", unfinished, "--camera", "0", "--t", "0.5", "--out", tmp_path / "r"], capsys)
+    rc, err = cli(["render", unfinished, "--camera", "0", "--t", "0.5", "--out", tmp_path / "r"], capsys)
     assert rc == 1 and "has not finished" in err and "run the same `e4dgs train` again" in err
-    rc, err = cli(["render", "--model", unfinished, "--camera", "0", "--t", "0.5", "--out", garbage], capsys)
+    rc, err = cli(["render", unfinished, "--camera", "0", "--t", "0.5", "--out", garbage], capsys)
     assert rc == 1 and "an existing file; expected a folder" in err
 
 
@@ -363,7 +363,7 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
     import recon
     from common.config import ConfigError
 
-    recipe = ROOT / "configs" / "recon" / "d3dgs_quick.yaml"
+    recipe = ROOT / "configs" / "recipes" / "d3dgs" / "mlp.yaml"
     with pytest.raises(ConfigError) as info:                     # the file is fine, the --set is not
         recon.resolve_config("d3dgs", recipe, {"train.lr.nosuch": 1})
     assert str(info.value).startswith("--set: train.lr.nosuch: unknown key")
@@ -386,14 +386,14 @@ def test_config_errors_blame_the_source_that_made_them(tmp_path):
 
 
 def test_simulate_names_a_frame_rate_beyond_microseconds_and_an_output_under_a_file(frames, tmp_path, capsys):
-    rc, err = cli(["simulate", "--frames", frames, "--fps", "1e9", "--out", tmp_path / "e.h5"], capsys)
+    rc, err = cli(["simulate", frames, "--fps", "1e9", "--out", tmp_path / "e.h5"], capsys)
     assert rc == 1 and "less than 1 us apart" in err and "timestamps must increase" not in err
     (tmp_path / "note.txt").write_text("x")
     out = tmp_path / "note.txt" / "sub" / "e.h5"
-    rc, err = cli(["simulate", "--frames", frames, "--fps", "1000", "--out", out], capsys)
+    rc, err = cli(["simulate", frames, "--fps", "1000", "--out", out], capsys)
     assert rc == 1 and "note.txt is not a folder" in err and "File exists" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frames", "note.txt"]
-    rc, err = cli(["simulate", "--frames", frames, "--fps", "1e6", "--out", tmp_path / "ok.h5"], capsys)
+    rc, err = cli(["simulate", frames, "--fps", "1e6", "--out", tmp_path / "ok.h5"], capsys)
     assert rc == 0, err                                        # 1 us apart is still whole microseconds
 
 
@@ -432,12 +432,12 @@ def test_seeds_scene_lists_and_frame_names_that_cannot_be_meant_are_refused(tmp_
     frames.mkdir()
     for name in ("frame9", "frame10", "frame_a", "frame_b"):
         cv2.imwrite(str(frames / f"{name}.png"), np.full((8, 8), 128, np.uint8))
-    rc, err = cli(["simulate", "--frames", frames, "--fps", "3000", "--out", tmp_path / "ev.h5"], capsys)
+    rc, err = cli(["simulate", frames, "--fps", "3000", "--out", tmp_path / "ev.h5"], capsys)
     assert rc == 1 and "frame10.png ends in a frame number but frame_a.png does not" in err
     assert not (tmp_path / "ev.h5").exists()
-    for args, words in ((["simulate", "--frames", str(frames), "--fps", "3000", "--out", str(tmp_path / "ev.h5"),
+    for args, words in ((["simulate", str(frames), "--fps", "3000", "--out", str(tmp_path / "ev.h5"),
                           "--seed", "99999999999999999999999"], "--seed: expected an integer seed in 0 .. 9223372036854775807"),
-                        (["simulate", "--frames", str(frames), "--fps", "3000", "--out", str(tmp_path / "ev.h5"),
+                        (["simulate", str(frames), "--fps", "3000", "--out", str(tmp_path / "ev.h5"),
                           "--seed", "-1"], "--seed: expected an integer seed"),
                         (["dataset", "--preset", "tiny", "--scenes", "", "--out", str(tmp_path / "d")],
                          "--scenes: expected one or more comma-separated names"),
@@ -445,7 +445,7 @@ def test_seeds_scene_lists_and_frame_names_that_cannot_be_meant_are_refused(tmp_
                          "--scenes: expected one or more"),
                         (["bench", "--preset", "tiny", "--scenes", "cubes,,x", "--out", str(tmp_path / "b")],
                          "--scenes: a blank name between commas"),
-                        (["bench", "--preset", "tiny", "--methods", "", "--out", str(tmp_path / "b")], "--methods: expected")):
+                        (["bench", "--preset", "tiny", "--cells", "", "--out", str(tmp_path / "b")], "--cells: expected")):
         rc, err = cli(args, capsys)
         assert rc == 2 and words in err, (args, err)
     assert not (tmp_path / "d").exists() and not (tmp_path / "b").exists()
@@ -498,23 +498,23 @@ def test_an_output_inside_its_input_is_refused(motion_scene, tmp_path, capsys):
 
     before = sorted(p.relative_to(motion_scene) for p in Path(motion_scene).rglob("*"))
     for out in (motion_scene, Path(motion_scene) / "run"):
-        rc, err = cli(["train", "--scene", motion_scene, "--out", out, "--set", "train.iterations=2"], capsys)
+        rc, err = cli(["train", motion_scene, "--out", out, "--set", "train.iterations=2"], capsys)
         assert rc == 1 and (("inside the scene folder" in err and "choose another folder" in err)
-                            or f"is also --scene {motion_scene}" in err or f"lies inside --scene {motion_scene}" in err), err
+                            or f"is also SCENE {motion_scene}" in err or f"lies inside SCENE {motion_scene}" in err), err
         with pytest.raises(ValueError, match="out_dir: .*inside the scene folder"):
             recon.fit(motion_scene, "d3dgs", overrides={"train.iterations": 2}, out_dir=out, progress=False)
     root = Path(motion_scene).parent
     rc, err = cli(["bench", "--preset", "tiny", "--data", root, "--out", root / "results"], capsys)
     assert rc == 1 and "inside --data" in err
-    rc, err = cli(["score", "--data", root, "--renders", tmp_path, "--name", "x", "--inputs", "rgb",
+    rc, err = cli(["score", "--data", root, tmp_path, "--name", "x", "--inputs", "rgb",
                    "--out", tmp_path / "r"], capsys)
-    assert rc == 1 and "inside --renders" in err
+    assert rc == 1 and "inside RENDERS" in err
     assert sorted(p.relative_to(motion_scene) for p in Path(motion_scene).rglob("*")) == before
     assert not (root / "results").exists() and not (tmp_path / "r").exists()
 
 
 def test_a_sliding_window_video_shows_the_last_events():
-    """`e4dgs view --window 5ms` on a 19.7 ms stream: four frames, the last one ending at the stream's end."""
+    """`e4dgs draw-events --window 5ms` on a 19.7 ms stream: four frames, the last one ending at the stream's end."""
     from simulator.event_pictures import window_starts
 
     assert window_starts(0, 19_700, 5000, 5000) == [0, 5000, 10_000, 14_700]
@@ -531,7 +531,7 @@ def test_a_real_full_disk_names_the_file_and_leaves_no_partial_output(motion_sce
     if r.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here: {r.stderr.decode(errors='replace').strip()}")
     try:
-        rc, err = cli(["e2vid", "--events", Path(motion_scene) / "events" / "cam0.h5", "--out", small / "video"], capsys)
+        rc, err = cli(["e2vid", Path(motion_scene) / "events" / "cam0.h5", "--out", small / "video"], capsys)
         assert rc == 1 and "No space left on device" in err and str(small / "video") in err, err
         assert list(small.iterdir()) == []
     finally:
@@ -555,16 +555,17 @@ def test_a_shipped_config_is_found_from_any_folder_and_by_name(tmp_path, monkeyp
     from common.config import ConfigError
 
     monkeypatch.chdir(tmp_path)                     # outside the checkout
-    by_path = recon.resolve_config("d3dgs", "configs/recon/d3dgs_quick.yaml")
-    assert by_path == recon.resolve_config("d3dgs", "d3dgs_quick") and by_path.train.iterations == 1500
-    assert recon.resolve_config("e4dgs", "e4dgs_quick.yaml").train.iterations == \
-        recon.resolve_config("e4dgs", Path(__file__).resolve().parents[2] / "configs/recon/e4dgs_quick.yaml").train.iterations
-    assert recon.resolve_config("d3dgs", "d3dgs_quick", overrides={"train.iterations": 7}).train.iterations == 7
-    assert recon.resolve_config("e4dgs", "bench/e4dgs_quick") == \
-        recon.resolve_config("e4dgs", Path(__file__).resolve().parents[2] / "configs/recon/bench/e4dgs_quick.yaml")
-    (tmp_path / "d3dgs_quick.yaml").write_text("train: {iterations: 3}\n")     # a file of the user's wins
-    assert recon.resolve_config("d3dgs", "d3dgs_quick.yaml").train.iterations == 3
-    with pytest.raises(ConfigError, match=r"nope: cannot read config file .*shipped: .*bench/e4dgs_quick"):
+    repo = Path(__file__).resolve().parents[2]
+    by_path = recon.resolve_config("d3dgs", "configs/recipes/d3dgs/mlp.yaml")
+    assert by_path == recon.resolve_config("d3dgs", "d3dgs/mlp") and by_path.train.iterations == 1500
+    # `quick` with a method is that method's leaderboard recipe
+    for method in ("d3dgs", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb"):
+        assert recon.resolve_config(method, "quick") == recon.resolve_config(method, repo / f"configs/recipes/{method}/quick.yaml")
+        assert recon.resolve_config(method, "quick") == recon.resolve_config(method, f"{method}/quick")
+    assert recon.resolve_config("d3dgs", "d3dgs/mlp", overrides={"train.iterations": 7}).train.iterations == 7
+    (tmp_path / "quick.yaml").write_text("train: {iterations: 3}\n")     # a file of the user's wins
+    assert recon.resolve_config("d3dgs", "quick.yaml").train.iterations == 3
+    with pytest.raises(ConfigError, match=r"nope: cannot read config file .*shipped: .*e4dgs/quick"):
         recon.resolve_config("d3dgs", "nope")
 
 

@@ -201,8 +201,8 @@ def bad_inputs(folder: Path, good: Path) -> dict[str, Path]:
 EVENT_COMMANDS = {
     "import": lambda f, o: ["import", f, "--out", o / "out.h5"],
     "check": lambda f, o: ["check", f],
-    "view": lambda f, o: ["view", f, "--out", o / "v.png"],
-    "e2vid": lambda f, o: ["e2vid", "--events", f, "--out", o / "frames"],
+    "view": lambda f, o: ["draw-events", f, "--out", o / "v.png"],
+    "e2vid": lambda f, o: ["e2vid", f, "--out", o / "frames"],
     "export": lambda f, o: ["export", f, "--format", "npz", "--out", o / "x.npz"],
 }
 
@@ -241,7 +241,7 @@ def test_every_event_file_reader_refuses_a_broken_input_in_one_line(command, kin
 FILE_OUTPUTS = {
     "import": lambda src, out: ["import", src, "--out", out],
     "export": lambda src, out: ["export", src, "--format", "npz", "--out", out],
-    "view": lambda src, out: ["view", src, "--out", out],
+    "view": lambda src, out: ["draw-events", src, "--out", out],
 }
 SUFFIX = {"import": ".h5", "export": ".npz", "view": ".png"}
 
@@ -279,8 +279,8 @@ def test_every_file_output_that_cannot_be_written_is_refused_in_one_line(command
 
 # -- config files and frames: empty, truncated, binary, of the wrong kind -----------------------------
 CONFIG_COMMANDS = {
-    "simulate --config": lambda f, d: ["simulate", "--frames", d / "frames", "--fps", "1000", "--out", d / "o.h5", "--config", f],
-    "train --config": lambda f, d: ["train", "--scene", d / "noscene", "--config", f, "--out", d / "run"],
+    "simulate --config": lambda f, d: ["simulate", d / "frames", "--fps", "1000", "--out", d / "o.h5", "--config", f],
+    "train --config": lambda f, d: ["train", d / "noscene", "--config", f, "--out", d / "run"],
     "dataset --preset": lambda f, d: ["dataset", "--preset", f, "--out", d / "data"],
     "dataset --scene-config": lambda f, d: ["dataset", "--preset", "tiny", "--scene-config", f, "--out", d / "data"],
     "bench --preset": lambda f, d: ["bench", "--preset", f, "--out", d / "runs"],
@@ -320,6 +320,6 @@ def test_simulate_refuses_a_broken_frame_naming_it(kind, tmp_path, capsys):
     data = bad.read_bytes()
     bad.write_bytes({"empty": b"", "truncated": data[: len(data) // 2], "text": b"not an image\n",
                      "one-pixel": cv2.imencode(".png", np.zeros((1, 1, 3), np.uint8))[1].tobytes()}[kind])
-    rc, err = run_cli(["simulate", "--frames", frames, "--fps", "1000", "--out", tmp_path / "ev.h5"], capsys)
+    rc, err = run_cli(["simulate", frames, "--fps", "1000", "--out", tmp_path / "ev.h5"], capsys)
     assert rc == 1 and len(err) == 1 and "001.png" in err[0] and "internal error" not in err[0], err
     assert not (tmp_path / "ev.h5").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["frames"]

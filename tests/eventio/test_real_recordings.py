@@ -51,12 +51,12 @@ def test_a_stream_near_zero_keeps_offset_zero_and_the_same_bytes(tmp_path):
 def test_epoch_events_reach_view_e2vid_and_check(tmp_path, capsys):
     s = epoch_stream()
     path = write_events(tmp_path / "rec.h5", s)
-    assert main(["view", str(path), "--out", str(tmp_path / "v.mp4"), "--window", "100ms"]) == 0
+    assert main(["draw-events", str(path), "--out", str(tmp_path / "v.mp4"), "--window", "100ms"]) == 0
     assert "20 frames of 100000 us" in capsys.readouterr().out           # from the first event, not from 0
-    assert main(["view", str(path), "--out", str(tmp_path / "v.png")]) == 0
+    assert main(["draw-events", str(path), "--out", str(tmp_path / "v.png")]) == 0
     assert f"3000 events in [{s.events['t'][0]}, {s.events['t'][-1] + 1}) us" in capsys.readouterr().out
     assert main(["check", str(path)]) == 0
-    assert main(["e2vid", "--events", str(path), "--out", str(tmp_path / "frames")]) == 0
+    assert main(["e2vid", str(path), "--out", str(tmp_path / "frames")]) == 0
     stamps = [int(v) for v in (tmp_path / "frames" / "timestamps.txt").read_text().split()]
     assert len(stamps) == 30 and EPOCH_US < stamps[0] < stamps[-1] <= EPOCH_US + 2_000_000
 
@@ -64,9 +64,9 @@ def test_epoch_events_reach_view_e2vid_and_check(tmp_path, capsys):
 def test_view_refuses_a_video_of_millions_of_frames_and_a_giant_picture(tmp_path, capsys):
     path = write_events(tmp_path / "rec.h5", epoch_stream())
     with pytest.raises(SystemExit, match="frames; at most 100000"):
-        main(["view", str(path), "--out", str(tmp_path / "v.mp4"), "--window", "1us"])
+        main(["draw-events", str(path), "--out", str(tmp_path / "v.mp4"), "--window", "1us"])
     with pytest.raises(SystemExit, match="at most 8192 a side"):
-        main(["view", str(path), "--out", str(tmp_path / "v.png"), "--scale", "1000000"])
+        main(["draw-events", str(path), "--out", str(tmp_path / "v.png"), "--scale", "1000000"])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.h5"]
 
 

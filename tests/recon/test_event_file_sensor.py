@@ -20,7 +20,7 @@ def linlog_scene(tmp_path_factory):
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
-    preset = yaml.safe_load((root / "configs" / "dataset_tiny_motion.yaml").read_text())
+    preset = yaml.safe_load((root / "tests" / "fixtures" / "configs" / "datasets" / "tiny_motion.yaml").read_text())
     preset["overrides"]["sensor"] = {"log_mode": "linlog", "pos_threshold": 0.3, "neg_threshold": 0.2}
     out = tmp_path_factory.mktemp("tiny_linlog")
     (out / "tiny_linlog.yaml").write_text(yaml.safe_dump(preset))

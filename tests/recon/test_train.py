@@ -21,7 +21,7 @@ from recon.dataset_views import record_camera
 ROOT = Path(__file__).resolve().parents[2]
 
 # a small, fast D3DGS: the public schedule scaled to the budget (warm-up at its 200-iteration floor),
-# colour learning rate 4x the public one (random init starts grey; see configs/recon/d3dgs_quick.yaml)
+# colour learning rate 4x the public one (random init starts grey; see configs/recipes/d3dgs/mlp.yaml)
 FAST = {"train.init.n_points_object": 2000, "train.precision": "float32", "train.snapshots": [1.0],
         "train.checkpoint_every": 1000, "train.lr.feature": 0.01}
 OVERFIT_ITERS = 600
@@ -173,12 +173,12 @@ def test_config_errors_name_the_key(motion_scene, tmp_path):
 
 def test_cli_train_and_render(motion_scene, tmp_path):
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "e4dgs", "train", "--scene", str(motion_scene), "--method", "d3dgs", "--out", str(out),
+    cmd = [sys.executable, "-m", "e4dgs", "train", str(motion_scene), "--method", "d3dgs", "--out", str(out),
            "--no-progress", "--set", "train.iterations=30", "--set", "train.init.n_points_object=300"]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     assert "30 iterations" in r.stdout and (out / "model.pt").exists() and (out / "config.yaml").exists()
-    r = subprocess.run([sys.executable, "-m", "e4dgs", "render", "--model", str(out), "--camera", "1", "--t", "0", "0.5",
+    r = subprocess.run([sys.executable, "-m", "e4dgs", "render", str(out), "--camera", "1", "--t", "0", "0.5",
                         "--out", str(tmp_path / "img")], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in (tmp_path / "img").iterdir()) == ["cam1_t0.0000.png", "cam1_t0.5000.png"]

@@ -35,7 +35,7 @@ def test_a_crashed_generator_is_started_again_and_the_same_command_resumes(monke
 
     out = tmp_path / "fixed"
     ba, calls = _fake_workers(monkeypatch, [-6, -11, 0], out, "cubes")
-    assert ba.generate(PRESETS_DIR / "dataset_tiny.yaml", "cubes", {}, out) == {"scene": "cubes"}
+    assert ba.generate(PRESETS_DIR / "tiny.yaml", "cubes", {}, out) == {"scene": "cubes"}
     assert len(calls) == 3 and calls[0] == calls[1] == calls[2]          # the same out folder: it resumes
     assert str(out) in calls[0]
     assert capsys.readouterr().out.count("starting it again from its last checkpoint") == 2
@@ -44,7 +44,7 @@ def test_a_crashed_generator_is_started_again_and_the_same_command_resumes(monke
 def test_a_generator_that_keeps_crashing_or_fails_by_itself_is_reported(monkeypatch, tmp_path):
     from datagen.config import PRESETS_DIR
 
-    preset = PRESETS_DIR / "dataset_tiny.yaml"
+    preset = PRESETS_DIR / "tiny.yaml"
     ba, calls = _fake_workers(monkeypatch, [-6] * 5, tmp_path / "a", "cubes")
     with pytest.raises(SystemExit, match="cubes: generation failed"):
         ba.generate(preset, "cubes", {}, tmp_path / "a")

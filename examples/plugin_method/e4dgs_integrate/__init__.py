@@ -9,7 +9,7 @@ method it knows no absolute intensity, so it is scored after the benchmark's log
 It lives outside the toolkit and is found through the entry point `integrate_d3dgs` of the group
 `e4dgs.methods` (pyproject.toml). After `pip install ./examples/plugin_method`:
 
-    e4dgs train --scene data/quick/hinge --method integrate_d3dgs
+    e4dgs train data/quick/hinge --method integrate_d3dgs
     # a bench preset cell:  mine: {method: integrate_d3dgs, label: "Event integration + D3DGS"}
 """
 from __future__ import annotations
