@@ -27,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from common import progress
+
 LOCAL = "local"          # `--ray` without an address: start a Ray instance on this machine
 
 
@@ -128,16 +130,29 @@ def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | No
     if log_path is None:
         return fn(*args)
     Path(log_path).parent.mkdir(parents=True, exist_ok=True)
-    with open(log_path, "a", buffering=1) as log, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-        print(f"--- {key}: attempt started {time.strftime('%Y-%m-%d %H:%M:%S')} on {socket.gethostname()} "
-              f"(pid {os.getpid()})")
-        try:
-            value = fn(*args)
-        except BaseException:
-            traceback.print_exc()
-            raise
-        print(f"--- {key}: finished {time.strftime('%Y-%m-%d %H:%M:%S')}")
-        return value
+    before = os.environ.get(progress.ENV)
+    os.environ[progress.ENV] = str(progress_path(log_path))     # the job's loops (and its children) report there
+    try:
+        with open(log_path, "a", buffering=1) as log, contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
+            print(f"--- {key}: attempt started {time.strftime('%Y-%m-%d %H:%M:%S')} on {socket.gethostname()} "
+                  f"(pid {os.getpid()})")
+            try:
+                value = fn(*args)
+            except BaseException:
+                traceback.print_exc()
+                raise
+            print(f"--- {key}: finished {time.strftime('%Y-%m-%d %H:%M:%S')}")
+            return value
+    finally:
+        if before is None:
+            os.environ.pop(progress.ENV, None)
+        else:
+            os.environ[progress.ENV] = before
+
+
+def progress_path(log_path: str | os.PathLike) -> Path:
+    """Where a job with this log reports its progress (common.progress): beside the log."""
+    return Path(f"{log_path}.progress")
 
 
 class _Tracker:
@@ -236,6 +251,10 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                 max(1, int(s.num_cpus)))
             pending[ref] = s
         failed = 0
+        for s in specs:                  # a report left by an earlier run is not this one's
+            if s.log_path is not None:
+                progress_path(s.log_path).unlink(missing_ok=True)
+        shown_at, last_status = 0.0, ""
         with tqdm(total=len(specs), desc=desc, unit="job", disable=not progress) as bar:
             while pending:
                 ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
@@ -250,10 +269,18 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                     with tqdm.external_write_mode():          # the caller's log lines above the bar
                         on_outcome(outcome)
                     bar.update(1)
+                    if spec.log_path is not None:
+                        progress_path(spec.log_path).unlink(missing_ok=True)
                 running = _running(ray, tracker, pending)
                 status = f"done {len(outcomes) - failed}, running {running}, failed {failed}"
-                if status != getattr(bar, "postfix", None):   # redraw on a change only: a log gets a line
-                    bar.set_postfix_str(status)                # per change, not one per second of polling
+                # redraw on a change of the counts, and with the running jobs' positions every few
+                # seconds: a log gets a line per change, not one per second of polling
+                if progress and (status != last_status or time.time() - shown_at >= PROGRESS_EVERY_S):
+                    shown_at, last_status = time.time(), status
+                    inside = _inside(pending)
+                    text = status + (f" | {inside}" if inside else "")
+                    if text != getattr(bar, "postfix", None):
+                        bar.set_postfix_str(text)
         try:
             ray.kill(tracker)          # now, not when Ray collects the handle (a later run's actor is another)
         except Exception:      # noqa: BLE001 - already gone (killed for memory and not restarted)
@@ -270,6 +297,20 @@ def tracker_name() -> str:
     so a second call never meets the first's actor, which Ray removes asynchronously (a busy machine
     once had the second call refused: the name was still taken)."""
     return _TRACKER_NAME
+
+
+PROGRESS_EVERY_S = 5.0       # how often the bar shows the running jobs' positions
+
+
+def _inside(pending: dict) -> str:
+    """Each running job's position in its unit of work, from its progress file ('' when none reported)."""
+    parts = []
+    for s in pending.values():
+        if s.log_path is not None:
+            text = progress.describe(progress.read(progress_path(s.log_path)))
+            if text:
+                parts.append(f"{s.key}: {text}")
+    return "; ".join(parts)
 
 
 def _running(ray, tracker, pending: dict) -> str:

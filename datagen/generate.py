@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from common import progress
+
 import common
 from common import provenance
 from common.provenance import git_commit as _git_commit
@@ -183,6 +185,7 @@ class SceneJob:
                 for job, stream, secs in zip(self.jobs, streams, seconds):
                     job._consume(i, frames, *stream, secs)
                 anchor = (i, frames)
+                progress.report(i + 1, cfg.n_timestamps, "timestamps")   # the driver's view under Ray
                 if self.progress and i % 10 == 0:
                     bar.set_postfix_str(" ".join(f"c{k}:{s.n_events / 1e3:.0f}k" for k, s in enumerate(spools)))
                 if i + 1 - last_ckpt >= self.checkpoint_every and i + 1 < cfg.n_timestamps:

@@ -56,9 +56,12 @@ def reconstruct_frames(recon: Reconstructor, events: np.ndarray, width: int, hei
     shows a bar over the network's windows."""
     from tqdm import tqdm
 
+    from common.progress import report
+
     frames = np.zeros((len(t_out_us), height, width), np.float32)
     windows = list(split_windows(events["t"], t_out_us, events_per_window))
-    for i0, i1, k in tqdm(windows, desc="e2vid", unit="window", disable=not progress):
+    for j, (i0, i1, k) in enumerate(tqdm(windows, desc="e2vid", unit="window", disable=not progress)):
+        report(j + 1, len(windows), "e2vid windows")
         vox = normalize_voxel(torch.from_numpy(voxel_grid_events(events[i0:i1], num_bins, width, height)))
         img = recon(vox)
         if k >= 0:

@@ -27,6 +27,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from common import progress
+
 from scene_format.reader import SceneDataset
 from common.config import dump_config, to_dict
 from common.checkpoint import torch_load
@@ -438,6 +440,7 @@ class Trainer:
             self.iteration = it
             row = self._record(it, loss_value, info, snaps)
             bar.update(1)
+            progress.report(it, self.tcfg.iterations, "it")       # the driver's view of a job run elsewhere
             bar.set_postfix(loss=f"{loss_value:.4f}", n=len(self.model),
                             **({f"psnr ({row['test_psnr_on']})": row["test_psnr"]} if "test_psnr" in row else {}))
             if it % self.tcfg.checkpoint_every == 0 and it < self.tcfg.iterations:

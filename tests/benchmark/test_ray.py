@@ -3,6 +3,7 @@ numbers, a worker killed mid-job is retried and every row arrives, a job that ke
 a 'failed' row without losing the others, scene files are verified on the worker, and a dataset
 generated through Ray is byte-identical to the serial one. The serial paths never import Ray."""
 import json
+import re
 import os
 import shutil
 import signal
@@ -347,3 +348,40 @@ def test_rays_messages_go_to_the_log_with_one_line_on_the_console(tmp_path, caps
     assert err.out == "" and err.err.count("\n") == 1
     assert err.err.startswith("ray: OOM kill reason: Memory usage 24151179264B exceeded threshold") and str(log) in err.err
     assert "Object store memory usage" in log.read_text() and ray_worker.print_to_stdstream is original
+
+
+def _counting_job(n: int, child: bool) -> int:
+    """A job that reports its position: in this process, or (child) from a subprocess it starts."""
+    import subprocess
+    import sys
+    import time
+
+    from common.progress import report
+
+    if child:
+        code = ("import time\nfrom common.progress import report\n"
+                f"for i in range({n}):\n    report(i + 1, {n}, 'timestamps')\n    time.sleep(0.5)\n")
+        subprocess.run([sys.executable, "-c", code], check=True, cwd=str(ROOT))
+        return n
+    for i in range(n):
+        report(i + 1, n, "it")
+        time.sleep(0.5)
+    return n
+
+
+def test_the_bar_shows_each_running_jobs_position_and_time_left_also_from_a_child_process(tmp_path, local_ray, capsys,
+                                                                                            monkeypatch):
+    """`make benchmark` renders its scenes as Ray tasks whose scene worker is a child process; the
+    driver's bar names each running job's position in its unit (timestamps, iterations) with an
+    estimate of the time left, read from the file the job (or its child) reports to."""
+    import common.taskpool as taskpool
+
+    monkeypatch.setattr(taskpool, "PROGRESS_EVERY_S", 0.5)
+    specs = [TaskSpec("scene", _counting_job, (14, True), log_path=tmp_path / "scene.log"),
+             TaskSpec("cell", _counting_job, (14, False), log_path=tmp_path / "cell.log")]
+    outcomes = run_tasks(specs, RayOptions(retries=0), lambda o: None, progress=True)
+    assert sorted(o.value for o in outcomes) == [14, 14]
+    err = capsys.readouterr().err
+    assert re.search(r"scene: \d+/14 timestamps, ~\d+ s left", err), err[-2000:]
+    assert re.search(r"cell: \d+/14 it, ~\d+ s left", err), err[-2000:]
+    assert not list(tmp_path.glob("*.progress"))          # a finished job's report is gone
