@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 
 # Per-machine state beside the environment: numba's compiled kernels and the measured deformation
 # precision (train.precision: auto). OMP_WAIT_POLICY=PASSIVE: idle OpenMP threads sleep instead of
-# spinning, which on a shared machine made torch 10x slower (docs/recon.md, "Threads").
+# spinning, which on a shared machine made torch 10x slower (docs/design/recon.md, "Threads").
 RUNENV = NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-cache E4DGS_CACHE_DIR=$(CURDIR)/$(VENV)/e4dgs-cache
 
 test: $(STAMP)

@@ -98,7 +98,7 @@ class BenchConfig:
     # give the mean and spread over them, and call differences within the spread ties
     seeds: int = 1
     # the seed spread (standard deviation over training seeds) of each cell's scores on one scene, as
-    # measured (docs/benchmark.md): what the tables take as a one-seed cell's spread where results.jsonl
+    # measured (docs/results/benchmark.md): what the tables take as a one-seed cell's spread where results.jsonl
     # holds no cell of its kind at two seeds or more: {cell: {psnr: dB, ssim: ..., lpips: ...}}
     seed_spread: dict[str, dict[str, float]] = field(default_factory=dict)
     snapshot_metrics: tuple[str, ...] = ("psnr", "ssim")    # at 10/25/50 % (the final model gets all)

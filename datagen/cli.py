@@ -19,7 +19,7 @@ def add_dataset_parser(sub) -> None:
     p.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
     p.add_argument("--scene-file", type=Path, action="append", default=None,
                    help="your own animated scene instead of the preset's: .blend, .glb/.gltf, .fbx, .obj, .usd*, .abc "
-                        "(the preset's overrides apply; docs/dataset.md, 'Make a dataset from your own scene'); "
+                        "(the preset's overrides apply; docs/design/dataset.md, 'Make a dataset from your own scene'); "
                         "may be given several times")
     p.add_argument("--kind", choices=("object", "room"), default="object",
                    help="with --scene-file: cameras around the content (object) or inside it (room)")

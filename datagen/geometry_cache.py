@@ -1,7 +1,7 @@
 """What a scene's generation measures from its geometry before it renders (the blur levels' exposures
 and windows, the test views' dynamic masks, the render schedule), kept beside its checkpoint so a
 resumed run does not measure it again: in a paper-preset room that measurement is 15-27 minutes per
-start on one core (docs/dataset.md).
+start on one core (docs/design/dataset.md).
 
 The cache is one atomic .npz (common.checkpoint.JobCheckpoint, no pickles) tied to the scene's config
 fingerprint and this module's FORMAT; any mismatch or unreadable file is dropped and the geometry

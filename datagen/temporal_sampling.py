@@ -16,7 +16,7 @@ What fills the skipped frames (datagen.generate):
   the linear-light blend of the two rendered frames around it (`blend_weights`), i.e. the exposure
   integral by the trapezoid rule over the rendered frames.
 The error against rendering every frame is measured by `python -m tools.bench_render_rate
---adaptive ...` (docs/dataset.md).
+--adaptive ...` (docs/design/dataset.md).
 """
 from __future__ import annotations
 

@@ -38,7 +38,7 @@ class InitConfig:
     `carve_window` (a fraction of the clip), pixels active with >= `carve_min_events` events in
     their 3x3 neighbourhood, grown by `carve_dilate_px`. `color`: every point starts mid-grey (0.5,
     as 3DGS without SfM colours), or the scene's empty-background colour, so that the initial model
-    renders no contrast at all and every contrast it ends with was learned (docs/e4dgs.md).
+    renders no contrast at all and every contrast it ends with was learned (docs/design/e4dgs.md).
     `carve_fallback`: where the carving keeps no point (too few events agree between the cameras),
     `auto` starts from the auto volume instead, recorded in run.json's `init_fallback`; `error` stops."""
     kind: Literal["auto", "cube", "sphere", "points", "events"] = "auto"
@@ -54,7 +54,7 @@ class InitConfig:
     carve_times: int = 9
     carve_window: float = 0.01      # quick hinge, untrained model: 0.1 / 3 px 27.99 dB, 0.03 / 2 px 28.37,
     carve_min_events: int = 2       # 0.01 / 1 px 28.72 (the shorter the window, the less the motion
-    carve_dilate_px: int = 1        # smears the silhouettes; docs/e4dgs.md)
+    carve_dilate_px: int = 1        # smears the silhouettes; docs/design/e4dgs.md)
     carve_fallback: Literal["auto", "error"] = "auto"
 
     def __post_init__(self):

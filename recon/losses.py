@@ -52,7 +52,7 @@ def ssim(img: torch.Tensor, ref: torch.Tensor, window: int = 11, sigma: float = 
     maps go through one depthwise convolution along the rows and one along the columns (2 x 11 taps
     per pixel instead of 121; zero padding in each pass is the 2-D zero padding). On one core at
     346 x 260 forward + backward is 1.8x faster for three channels and 13x for one (torch's 2-D
-    single-channel path is slow); docs/training_speed.md."""
+    single-channel path is slow); docs/results/training_speed.md."""
     x, y = _as_nchw(img, ref)
     C = x.shape[1]
     k = 5 * C

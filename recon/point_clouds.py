@@ -1,4 +1,4 @@
-"""Initial point clouds without SfM (shared by D3DGS and E-4DGS; see docs/recon.md).
+"""Initial point clouds without SfM (shared by D3DGS and E-4DGS; see docs/design/recon.md).
 
 - objects: points uniform in an axis-aligned cube;
 - rooms: a dense-to-sparse ball: radius uniform in [0, R] (not in volume), so the point density

@@ -3,7 +3,7 @@
 The 8 x 256 deformation MLP is about half of a training step on the CPU, and whether bfloat16 helps
 depends on the core: with native bf16 (AVX-512 BF16, AMX) a bf16 matrix product ran 2.9x faster
 than float32; on a core without it (AMD Zen 3, AVX2 only) 45x slower, and a whole D3DGS step 10.9x
-slower (docs/recon.md, "Precision"). So `auto` measures instead of assuming:
+slower (docs/design/recon.md, "Precision"). So `auto` measures instead of assuming:
 
     choice = resolve_precision("auto", torch.device("cpu"))   # PrecisionChoice(dtype="float32", ...)
     with autocast(choice.dtype, device):

@@ -100,7 +100,7 @@ def warn_static_schedule(tcfg: TrainConfig, sched) -> None:
 def warn_capped_densification(tcfg: TrainConfig, n_initial: int) -> None:
     """A ConfigWarning when the run starts with at least densify.max_gaussians Gaussians: no Gaussian
     is cloned or split until pruning brings the count below the cap (a room's 20k initial points
-    under a 15k cap kept garage's models at their initial, blurry Gaussians; docs/recon.md)."""
+    under a 15k cap kept garage's models at their initial, blurry Gaussians; docs/design/recon.md)."""
     import warnings
 
     from common.config import ConfigWarning

@@ -122,7 +122,7 @@ def trajectory_offsets(motion: torch.Tensor, t: float, degree: int, fourier: int
     """Same as trajectory_offsets_ref, as one weighted sum of the coefficients over the basis.
 
     (Not `basis @ motion`: torch runs that as N batched [1, B] x [B, 10] products, 2-3x slower
-    forward + backward on a CPU than this broadcast product and sum; docs/training_speed.md.)"""
+    forward + backward on a CPU than this broadcast product and sum; docs/results/training_speed.md.)"""
     basis = trajectory_basis(torch.as_tensor(float(t), dtype=motion.dtype, device=motion.device), degree, fourier)
     out = (basis[None, :, None] * motion).sum(1)      # [B] x [N, B, 10] -> [N, 10]
     return _split(out)

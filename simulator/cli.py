@@ -91,7 +91,7 @@ def add_simulate_parser(sub) -> None:
                    help="save a resumable checkpoint every N frames (default 500)")
     p.add_argument("--format", action="append", default=[], metavar="FORMAT", choices=EXTRA_FORMATS,
                    help="also write the events in this format beside the .h5 (repeatable): "
-                        + ", ".join(EXTRA_FORMATS) + " (docs/formats.md)")
+                        + ", ".join(EXTRA_FORMATS) + " (docs/reference/formats.md)")
     p.set_defaults(func=run_simulate, sibling_outputs=lambda a: [(f"--format {f}", extra_output(a.out, f))
                                                                  for f in dict.fromkeys(a.format)])
 

@@ -1,4 +1,4 @@
-"""The package layering of docs/architecture.md, read from the code's own imports."""
+"""The package layering of docs/design/architecture.md, read from the code's own imports."""
 import ast
 from pathlib import Path
 
@@ -46,7 +46,7 @@ def test_reconstruction_reads_the_scene_description_not_the_generator_config():
 
 
 def test_the_layers_are_documented_as_tested():
-    text = (ROOT / "docs" / "architecture.md").read_text()
+    text = (ROOT / "docs" / "design" / "architecture.md").read_text()
     for pkg, layer in LAYERS.items():
         assert f"| {layer} | `{pkg}/` |" in text, pkg
 
@@ -153,7 +153,9 @@ def test_no_two_files_import_each_other_even_indirectly():
 
 
 def test_the_tests_mirror_the_packages():
-    """tests/<package>/ holds the tests of one package (tests/e4dgs/: the command line, end to end)."""
+    """tests/<package>/ holds the tests of one package (tests/e4dgs/: the command line, end to end);
+    tests/fixtures/ the test-only inputs (configs the toolkit does not ship); beside them, the tests of
+    the whole tree: its layering and its docs."""
     folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and not p.name.startswith((".", "__"))}
-    assert folders and folders <= set(LAYERS), sorted(folders - set(LAYERS))
-    assert sorted(p.name for p in (ROOT / "tests").glob("test_*.py")) == ["test_architecture.py"]
+    assert folders and folders <= set(LAYERS) | {"fixtures"}, sorted(folders - set(LAYERS))
+    assert sorted(p.name for p in (ROOT / "tests").glob("test_*.py")) == ["test_architecture.py", "test_docs.py"]

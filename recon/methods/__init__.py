@@ -8,7 +8,7 @@ another package is a plug-in: it names its class in the entry-point group `e4dgs
     [project.entry-points."e4dgs.methods"]
     my_method = "my_package.method:MyMethod"
 
-and is then trained, rendered and benched like a bundled one (docs/your_method.md).
+and is then trained, rendered and benched like a bundled one (docs/guides/your_method.md).
 """
 from __future__ import annotations
 

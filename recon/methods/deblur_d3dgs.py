@@ -7,7 +7,7 @@ its exposure (camera poses and times known), against which the D3DGS photometric
 Deblur4DGS's multi-resolution consistency is added: the sharp render at the exposure centre,
 area-averaged over 4 x 4 blocks, is held to the blurred frame averaged the same way (L1, weight 1),
 which anchors the low frequencies that blur leaves intact. What of Deblur4DGS does not apply is in
-docs/recon.md (learned exposure spans and camera motion: ours are known; flow-aligned sub-frame
+docs/design/recon.md (learned exposure spans and camera motion: ours are known; flow-aligned sub-frame
 consistency: needs a pretrained optical-flow network; masks from a segmentation network).
 """
 from __future__ import annotations

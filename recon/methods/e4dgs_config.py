@@ -13,7 +13,7 @@ from recon.config import DensifyConfig, InitConfig, TrainConfig
 class EventConfig:
     """E-4DGS's event supervision. Every component has a switch for the paper's ablations."""
     # ESS: N uniform in a range. window_scale "rate": the range is window_fraction of each camera's
-    # events over the clip, so windows follow the dataset's event rate (docs/e4dgs.md says why);
+    # events over the clip, so windows follow the dataset's event rate (docs/design/e4dgs.md says why);
     # "pixels": the paper's counts (n_events_object / n_events_room, for its 346x260 sensor) scaled
     # by the pixel count. Either way capped at max_window_fraction of the smallest stream.
     ess: bool = True
@@ -68,7 +68,7 @@ def _e4dgs_train() -> TrainConfig:
     # of log intensity (d log(linear) / d sRGB ~ 2-8x), so its view-space gradients are 15-40x the
     # photometric ones; at 1e-3 the tiny test scene grew 2k -> 24k Gaussians in 340 iterations
     # initial points in the background's colour: events fix every contrast's sign, so a start with
-    # contrast of its own (mid-grey on a darker background) must first be unlearned (docs/e4dgs.md)
+    # contrast of its own (mid-grey on a darker background) must first be unlearned (docs/design/e4dgs.md)
     return TrainConfig(densify=DensifyConfig(opacity_reset=False, grad_threshold=3e-3),
                        init=InitConfig(color="background"))
 

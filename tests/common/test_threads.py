@@ -1,5 +1,5 @@
 """OpenMP's wait policy: every package sets OMP_WAIT_POLICY=PASSIVE (unless the user set one) before
-torch or numba load OpenMP, which reads it once (docs/recon.md, "Threads")."""
+torch or numba load OpenMP, which reads it once (docs/design/recon.md, "Threads")."""
 import ast
 import os
 import subprocess

@@ -391,7 +391,7 @@ def test_scenes_written_before_paths_were_relative_to_their_json_still_read(tiny
 
 def _d3dgs_camera(frame: dict, fovx: float, width: int, height: int, patched: bool):
     """A world-to-pixel map the way D3DGS's readCamerasFromTransforms builds its camera (older 3DGS
-    code: T = -inv(M)[:3, 3], FovX / FovY swapped), or with the two-line patch docs/dataset.md gives."""
+    code: T = -inv(M)[:3, 3], FovX / FovY swapped), or with the two-line patch docs/design/dataset.md gives."""
     matrix = np.linalg.inv(np.array(frame["transform_matrix"]))
     R = -np.transpose(matrix[:3, :3])
     R[:, 0] = -R[:, 0]

@@ -58,7 +58,7 @@ def _generate(out: Path, preset: Path) -> subprocess.CompletedProcess:
 
 def test_a_board_at_constant_image_speed_gives_the_fixed_rate_events_within_their_rendered_intervals(tmp_path):
     """The board slides at fx * v / (Z * fps) = 0.23 px per 3000 FPS frame, so a 1 px bound renders
-    every 4th frame (and the kept ones). The stated bound (docs/dataset.md): the sharp frames are the
+    every 4th frame (and the kept ones). The stated bound (docs/design/dataset.md): the sharp frames are the
     same bytes; per pixel and per rendered interval the signed event count is the fixed-rate one in
     >= 99 % of the cells with events, never off by more than one event (the events move only within the
     interval that holds them); the blurred frames are the trapezoid rule over the rendered frames."""

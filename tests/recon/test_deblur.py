@@ -54,7 +54,7 @@ TRAIN = {"train.iterations": 300, "train.init.n_points_object": 2000,
          "train.snapshots": [1.0], "train.checkpoint_every": 100000, "frames": "strong"}
 # measured at 300 iterations on strong blur (6 px): held-out gradient energy 0.429 of the truth's for
 # D3DGS, 0.446 for Deblur-D3DGS (3 exposure samples); PSNR 30.13 vs 30.04 dB. A weak effect: both
-# 2,000-Gaussian models are far blurrier than the blur itself (docs/recon.md)
+# 2,000-Gaussian models are far blurrier than the blur itself (docs/design/recon.md)
 SHARPER_BY = 0.01
 
 
