@@ -3,7 +3,7 @@ colour conversions, image metrics and run provenance. It imports no other packag
 
 import os
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # Idle OpenMP threads (torch's and numba's pools) sleep instead of spinning: on a machine shared with
 # other work, spinning threads made a 2-thread deformation step 2x slower than one thread, while on an

@@ -457,7 +457,7 @@ def test_a_job_resolves_its_config_once_opens_its_scene_once_and_never_reads_its
 
     def counting_open(file, mode="r", *a, **k):
         if "r" in mode and str(file).endswith(("manifest.json", "log.jsonl", "scene.yaml", "cameras.json",
-                                               "_quick.yaml")):
+                                               "/quick.yaml")):
             counts[Path(str(file)).name] += 1
         return real_open(file, mode, *a, **k)
 
