@@ -12,14 +12,18 @@ def add_dataset_parser(sub) -> None:
     p = sub.add_parser("dataset", help="generate the synthetic multi-view event dataset (Blender + simulator)",
                        description="Render, simulate and write every scene of a preset. Each scene runs in its own "
                                    "process; finished scenes are skipped and killed ones resume.")
-    p.add_argument("--preset", default="quick", help="quick | paper | tiny, or a preset YAML file (default quick)")
+    from datagen.config import PRESETS_DIR
+
+    shipped = sorted(p.stem for p in PRESETS_DIR.glob("*.yaml"))
+    p.add_argument("--preset", default="quick", help=f"{' | '.join(shipped)} (configs/datasets/), or a "
+                                                     "preset YAML file (default quick)")
     p.add_argument("--scenes", type=name_list, default=None, help="comma-separated subset of the preset's scenes")
     p.add_argument("--out", type=Path, default=None, help="dataset root (default data/<preset>)")
     p.add_argument("--jobs", type=positive_int, default=1, help="scenes generated side by side (default 1)")
     p.add_argument("--checkpoint-every", type=positive_int, default=100, metavar="N", help="timestamps between checkpoints")
     p.add_argument("--scene-file", type=Path, action="append", default=None,
                    help="your own animated scene instead of the preset's: .blend, .glb/.gltf, .fbx, .obj, .usd*, .abc "
-                        "(the preset's overrides apply; docs/design/dataset.md, 'Make a dataset from your own scene'); "
+                        "(the preset's overrides apply; docs/guides/your_scene.md); "
                         "may be given several times")
     p.add_argument("--kind", choices=("object", "room"), default="object",
                    help="with --scene-file: cameras around the content (object) or inside it (room)")

@@ -1,4 +1,4 @@
-"""Make the two example scenes of docs/design/dataset.md ("Make a dataset from your own scene") with
+"""Make the two example scenes of docs/guides/your_scene.md with
 Blender's Python API, as a user would in Blender: nothing is downloaded.
 
     .venv/bin/python examples/scenes/make_scenes.py examples/scenes/out

@@ -190,7 +190,6 @@ def test_a_failing_plugin_costs_only_its_own_cells_in_a_bench(motion_scene, tmp_
     write_report(rows, tmp_path / "runs", "", cfg)
     assert "failed" in (tmp_path / "runs" / "leaderboard.md").read_text()
     # `e4dgs bench` exits 1 naming the failed job, after writing the tables (here from the rows above)
-    import argparse
 
     from benchmark.cli import run_bench_cli
 
@@ -200,9 +199,10 @@ def test_a_failing_plugin_costs_only_its_own_cells_in_a_bench(motion_scene, tmp_
 
     preset = tmp_path / "mine.yaml"          # the preset the rows were made with (the tables keep only its rows)
     preset.write_text(yaml.safe_dump(dump(cfg)))
-    args = argparse.Namespace(preset=str(preset), ablation_seeds=None, out=tmp_path / "runs", data=motion_scene.parent,
-                              scenes=None, methods=None, report=True, studies=["main"], no_progress=True,
-                              seeds=None, reuse_older=False)
+    from e4dgs.cli import build_parser
+
+    args = build_parser().parse_args(["bench", "--preset", str(preset), "--out", str(tmp_path / "runs"), "--data",
+                                      str(motion_scene.parent), "--report", "--studies", "main", "--no-progress"])
     assert run_bench_cli(args) == 1
     assert f"main/{motion_scene.name}/broken" in capsys.readouterr().err
 
