@@ -12,12 +12,12 @@ and of every variant) is saved every `checkpoint_every` timestamps; a killed run
 same config continues from it and ends with the same files; what it measured from the geometry before
 rendering (blur windows, dynamic masks, render schedule) is kept beside the checkpoint
 (datagen.geometry_cache) and not measured again. `manifest.json` is written last (the
-variants' before the scene's): a scene folder without it is incomplete.
+variants' before the scene's): a scene folder without it is incomplete. The folder's writers (frames,
+metadata, manifests, exports) are datagen.scene_folder; this module is the loop.
 """
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
 import time
@@ -28,10 +28,7 @@ from tqdm import tqdm
 
 from common import progress
 
-import common
-from common import provenance
-from common.provenance import git_commit as _git_commit
-from datagen import geometry_cache
+from datagen import geometry_cache, scene_folder
 from datagen import render as R
 from datagen.blur import BlurStack
 from datagen.blur_geometry import BlurReport, measure_blur_many
@@ -39,53 +36,22 @@ from scene_format.cameras import intrinsics_from_fov
 from datagen.rig import scene_poses
 from scene_format.config import SceneConfig
 from datagen.config import load_preset, resolve_scene
-from datagen.preview import blur_psnr, contact_sheet, speed_sheet
-from scene_format.transforms import write_transforms
 from datagen.temporal_sampling import blend_weights
 from datagen.speed import check_interpolation, check_speeds, variant_config
-from scene_format.naming import SHUTTER_LEVEL, variant_name
+from scene_format.naming import variant_name
 from common.checkpoint import JobCheckpoint
-from common.config import ConfigError, dump_config
+from common.config import ConfigError
 from common.argtypes import positive_int
-from common.fileio import link_tree, output_lock, sha256_file, write_text_atomic
-from common.imageio import write_exr, write_png_srgb
-from eventio.h5io import read_info, simulator_attrs
+from common.fileio import link_tree, output_lock
+from common.imageio import write_png_srgb
+from eventio.h5io import simulator_attrs
 from common.color import rec709_luma
 from simulator.resumable import EventSpool, can_resume
 from simulator.simulator import EventSimulator
 
-FORMAT_VERSION = 1
-
-
-def config_fingerprint(cfg: SceneConfig) -> str:
-    """What a finished scene folder was made with. A scene built in code leaves `source` out, so
-    folders generated before scenes could come from files keep their fingerprint; `formats` (extra
-    exports, datagen.exports) changes nothing in the scene and is left out; `blur.fit` is left out
-    at its default, so folders generated before it existed keep theirs."""
-    import yaml
-
-    from common.config import to_dict
-
-    data = to_dict(cfg)
-    if not cfg.source.file:
-        data.pop("source")
-    data.pop("formats")
-    if not cfg.blur.fit:
-        data["blur"].pop("fit")
-    if not cfg.render.adaptive_px:                  # every frame rendered: max_stride says nothing
-        data["render"].pop("adaptive_px")
-        data["render"].pop("max_stride")
-    text = yaml.safe_dump(data, sort_keys=False)
-    return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{text}".encode()).hexdigest()
-
-
 def timestamps_us(cfg: SceneConfig) -> np.ndarray:
     """Real time (us) of every rendered frame: i / (fps * speed)."""
     return np.round(np.arange(cfg.n_timestamps) * 1e6 / cfg.real_fps).astype(np.int64)
-
-
-def _versions() -> dict:
-    return provenance.versions("numba", "h5py", bpy=R.blender_version())
 
 
 class SceneJob:
@@ -114,7 +80,7 @@ class SceneJob:
         self.blur: BlurReport | None = None   # exposures chosen from the scene geometry (run() measures them)
         self.dynamic: dict[tuple[int, int], np.ndarray] = {}     # (camera, kept index) -> dynamic mask (test views)
         self.windows: dict[str, dict[int, tuple[int, int]]] = {}
-        self.fingerprint = config_fingerprint(cfg)
+        self.fingerprint = scene_folder.config_fingerprint(cfg)
 
     # -- files -------------------------------------------------------------------------------
     def is_complete(self) -> bool:
@@ -128,10 +94,13 @@ class SceneJob:
         return True
 
     def _write_kept(self, k: int, j: int, rgb: np.ndarray) -> None:
-        name = f"{j:05d}"
-        write_exr(self.dir / "frames" / f"cam{k}" / f"{name}.exr", rgb, half=True)
-        write_png_srgb(self.dir / "rgb" / f"cam{k}" / f"{name}.png", rgb)
-        write_png_srgb(self.dir / "gray" / f"cam{k}" / f"{name}.png", rec709_luma(rgb))
+        scene_folder.write_kept(self.dir, k, j, rgb)
+
+    def _write_metadata(self, seconds: dict) -> None:
+        scene_folder.write_metadata(self, seconds)
+
+    def _exports(self) -> None:
+        scene_folder.write_exports(self)
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> Path:
@@ -210,14 +179,6 @@ class SceneJob:
         geometry_cache.remove(self.dir)
         self._exports()
         return self.dir
-
-    def _exports(self) -> None:
-        """The extra formats the config asks for, of the scene and its variants (datagen.exports)."""
-        if self.cfg.formats:
-            from datagen.exports import ensure_exports
-
-            for job in self.jobs:
-                ensure_exports(job.dir, self.cfg.formats)
 
     @property
     def jobs(self) -> list["SceneJob"]:
@@ -409,78 +370,6 @@ class SceneJob:
             state.update({f"{p}seconds_{name}": v + (elapsed if name == "total" and job is self else 0.0)
                           for name, v in secs.items()})
         ckpt.save(state)
-
-    # -- metadata ------------------------------------------------------------------------------
-    def _write_metadata(self, seconds: dict) -> None:
-        cfg, d = self.cfg, self.dir
-        t_write = time.perf_counter()
-        C = cfg.camera.n_cameras
-        cameras = {
-            "convention": "OpenCV camera axes (x right, y down, z forward); c2w = camera-to-world. "
-                          "Pixel (u, v) centre samples the image plane at (u + 0.5, v + 0.5).",
-            "intrinsics": self.intr.to_dict(),
-            "cameras": [{"camera": k, "timestamps_us": self.t_us.tolist(),
-                         "c2w_opencv": np.round(self.poses[k], 12).tolist()} for k in range(C)],
-        }
-        write_text_atomic(d / "cameras.json", json.dumps(cameras))
-        self._write_transforms()
-        write_text_atomic(d / "scene.yaml", f"# resolved scene config (preset: {self.preset})\n" + dump_config(cfg))
-        mid = len(self.kept) // 2
-        window = max(int(round(cfg.frames.keep_every * 1e6 / cfg.real_fps)), int(round(1000 / cfg.speed)))
-        blur = self.blur.manifest if self.blur else None
-        if blur:
-            for level in self.windows:
-                blur["levels"][level]["psnr_vs_sharp_db"] = blur_psnr(d, level, C, len(self.kept))
-        labels = {level: [f"{m:.1f} px" for m in self.blur.view_median_px[level][:, mid]] for level in self.windows}
-        if self._is_variant:
-            labels = {f"x{cfg.speed:g} {lv} {cfg.blur.exposure_ms[lv]:g} ms": v for lv, v in labels.items()}
-        if self.dynamic:
-            from datagen.dynamic import write_masks
-
-            write_masks(d, {v: m for v, m in self.dynamic.items() if v[1] % cfg.frames.test_every == 0})
-        contact_sheet(d, C, mid, int(self.t_us[self.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png",
-                      folders=list(self.windows), dynamic=[self.dynamic.get((k, mid)) for k in range(C)])
-        if self.variants:
-            speed_sheet(d, [v.dir for v in self.variants], mid, d / "preview" / "speeds.png")
-        seconds["write"] += time.perf_counter() - t_write
-        n_events = [read_info(d / "events" / f"cam{k}.h5")["n_events"] for k in range(C)]
-        files = sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith(".") and p.name != "manifest.json")
-        manifest = {
-            "scene": cfg.name, "preset": self.preset, "format_version": FORMAT_VERSION,
-            "config_sha256": self.fingerprint, "seed": cfg.seed, "git_commit": _git_commit(),
-            "versions": _versions(), "created_unix": int(time.time()),
-            "counts": {"cameras": C, "timestamps": cfg.n_timestamps, "kept_frames_per_camera": len(self.kept),
-                       "test_frames_per_camera": int(np.sum(np.arange(len(self.kept)) % cfg.frames.test_every == 0)),
-                       "events_per_camera": n_events},
-            "events_per_second_per_camera": [round(n / cfg.real_duration_s) for n in n_events],
-            "blur": blur,
-            **self._speed_manifest(),
-            **({"render_plan": self.render_plan} if self.render_plan.get("adaptive_px") else {}),
-            "seconds": {k: round(v, 3) for k, v in seconds.items()},
-            "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": sha256_file(p)} for p in files},
-        }
-        write_text_atomic(d / "manifest.json", json.dumps(manifest, indent=1))
-
-    def _speed_manifest(self) -> dict:
-        """A variant's speed (factor, exposure, frames it integrates, real clip length); a scene's variants."""
-        cfg = self.cfg
-        out = {}
-        if self._is_variant:
-            out["speed"] = {"factor": cfg.speed, "exposure_ms": cfg.speeds.exposure_ms,
-                            "n_frames": self.blur.manifest["levels"][SHUTTER_LEVEL]["n_frames"],
-                            "render_fps": cfg.render.fps, "real_fps": cfg.real_fps,
-                            "real_duration_s": cfg.real_duration_s, "scene": cfg.name,
-                            "construction": "time compression: the scene's rendered frames at timestamps divided by "
-                                            "the factor; events simulated again at those timestamps; blurred frames of "
-                                            "a fixed real-time exposure"}
-        if self.variants:
-            out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in self.variants}
-        return out
-
-    def _write_transforms(self) -> None:
-        write_transforms(self.dir, self.intr, self.t_us, self.poses, self.kept, self.windows, self.cfg.frames.test_every,
-                         self.cfg.render.fps)
-
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -1,0 +1,148 @@
+"""A scene folder's files beside the render loop (datagen.generate.SceneJob): the kept frames, the
+metadata (cameras.json, transforms, scene.yaml, masks, previews), the manifest with every file's
+SHA-256 (written last: a folder without it is incomplete), the speed variants' manifests and the
+extra event formats. Each writer reads the job's state and writes; none renders or simulates.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+import common
+from common import provenance
+from common.config import dump_config
+from common.color import rec709_luma
+from common.fileio import sha256_file, write_text_atomic
+from common.imageio import write_exr, write_png_srgb
+from common.provenance import git_commit as _git_commit
+from datagen import render as R
+from datagen.preview import blur_psnr, contact_sheet, speed_sheet
+from eventio.h5io import read_info
+from scene_format.config import SceneConfig
+from scene_format.naming import SHUTTER_LEVEL
+from scene_format.transforms import write_transforms as _write_transforms_file
+
+if TYPE_CHECKING:
+    from datagen.generate import SceneJob
+
+FORMAT_VERSION = 1
+
+
+def config_fingerprint(cfg: SceneConfig) -> str:
+    """What a finished scene folder was made with. A scene built in code leaves `source` out, so
+    folders generated before scenes could come from files keep their fingerprint; `formats` (extra
+    exports, datagen.exports) changes nothing in the scene and is left out; `blur.fit` is left out
+    at its default, so folders generated before it existed keep theirs."""
+    import yaml
+
+    from common.config import to_dict
+
+    data = to_dict(cfg)
+    if not cfg.source.file:
+        data.pop("source")
+    data.pop("formats")
+    if not cfg.blur.fit:
+        data["blur"].pop("fit")
+    if not cfg.render.adaptive_px:                  # every frame rendered: max_stride says nothing
+        data["render"].pop("adaptive_px")
+        data["render"].pop("max_stride")
+    text = yaml.safe_dump(data, sort_keys=False)
+    return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{text}".encode()).hexdigest()
+
+
+
+def versions() -> dict:
+    return provenance.versions("numba", "h5py", bpy=R.blender_version())
+
+
+def write_kept(folder: Path, k: int, j: int, rgb: np.ndarray) -> None:
+    """Kept frame j of camera k: linear half-float EXR, sRGB PNG, its Rec.709 luma as PNG."""
+    name = f"{j:05d}"
+    write_exr(folder / "frames" / f"cam{k}" / f"{name}.exr", rgb, half=True)
+    write_png_srgb(folder / "rgb" / f"cam{k}" / f"{name}.png", rgb)
+    write_png_srgb(folder / "gray" / f"cam{k}" / f"{name}.png", rec709_luma(rgb))
+
+
+def write_exports(job: "SceneJob") -> None:
+    """The extra formats the config asks for, of the scene and its variants (datagen.exports)."""
+    if job.cfg.formats:
+        from datagen.exports import ensure_exports
+
+        for job in job.jobs:
+            ensure_exports(job.dir, job.cfg.formats)
+
+
+def write_metadata(job: "SceneJob", seconds: dict) -> None:
+    cfg, d = job.cfg, job.dir
+    t_write = time.perf_counter()
+    C = cfg.camera.n_cameras
+    cameras = {
+        "convention": "OpenCV camera axes (x right, y down, z forward); c2w = camera-to-world. "
+                      "Pixel (u, v) centre samples the image plane at (u + 0.5, v + 0.5).",
+        "intrinsics": job.intr.to_dict(),
+        "cameras": [{"camera": k, "timestamps_us": job.t_us.tolist(),
+                     "c2w_opencv": np.round(job.poses[k], 12).tolist()} for k in range(C)],
+    }
+    write_text_atomic(d / "cameras.json", json.dumps(cameras))
+    write_transforms(job)
+    write_text_atomic(d / "scene.yaml", f"# resolved scene config (preset: {job.preset})\n" + dump_config(cfg))
+    mid = len(job.kept) // 2
+    window = max(int(round(cfg.frames.keep_every * 1e6 / cfg.real_fps)), int(round(1000 / cfg.speed)))
+    blur = job.blur.manifest if job.blur else None
+    if blur:
+        for level in job.windows:
+            blur["levels"][level]["psnr_vs_sharp_db"] = blur_psnr(d, level, C, len(job.kept))
+    labels = {level: [f"{m:.1f} px" for m in job.blur.view_median_px[level][:, mid]] for level in job.windows}
+    if job._is_variant:
+        labels = {f"x{cfg.speed:g} {lv} {cfg.blur.exposure_ms[lv]:g} ms": v for lv, v in labels.items()}
+    if job.dynamic:
+        from datagen.dynamic import write_masks
+
+        write_masks(d, {v: m for v, m in job.dynamic.items() if v[1] % cfg.frames.test_every == 0})
+    contact_sheet(d, C, mid, int(job.t_us[job.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png",
+                  folders=list(job.windows), dynamic=[job.dynamic.get((k, mid)) for k in range(C)])
+    if job.variants:
+        speed_sheet(d, [v.dir for v in job.variants], mid, d / "preview" / "speeds.png")
+    seconds["write"] += time.perf_counter() - t_write
+    n_events = [read_info(d / "events" / f"cam{k}.h5")["n_events"] for k in range(C)]
+    files = sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith(".") and p.name != "manifest.json")
+    manifest = {
+        "scene": cfg.name, "preset": job.preset, "format_version": FORMAT_VERSION,
+        "config_sha256": job.fingerprint, "seed": cfg.seed, "git_commit": _git_commit(),
+        "versions": versions(), "created_unix": int(time.time()),
+        "counts": {"cameras": C, "timestamps": cfg.n_timestamps, "kept_frames_per_camera": len(job.kept),
+                   "test_frames_per_camera": int(np.sum(np.arange(len(job.kept)) % cfg.frames.test_every == 0)),
+                   "events_per_camera": n_events},
+        "events_per_second_per_camera": [round(n / cfg.real_duration_s) for n in n_events],
+        "blur": blur,
+        **speed_manifest(job),
+        **({"render_plan": job.render_plan} if job.render_plan.get("adaptive_px") else {}),
+        "seconds": {k: round(v, 3) for k, v in seconds.items()},
+        "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": sha256_file(p)} for p in files},
+    }
+    write_text_atomic(d / "manifest.json", json.dumps(manifest, indent=1))
+
+def speed_manifest(job: "SceneJob") -> dict:
+    """A variant's speed (factor, exposure, frames it integrates, real clip length); a scene's variants."""
+    cfg = job.cfg
+    out = {}
+    if job._is_variant:
+        out["speed"] = {"factor": cfg.speed, "exposure_ms": cfg.speeds.exposure_ms,
+                        "n_frames": job.blur.manifest["levels"][SHUTTER_LEVEL]["n_frames"],
+                        "render_fps": cfg.render.fps, "real_fps": cfg.real_fps,
+                        "real_duration_s": cfg.real_duration_s, "scene": cfg.name,
+                        "construction": "time compression: the scene's rendered frames at timestamps divided by "
+                                        "the factor; events simulated again at those timestamps; blurred frames of "
+                                        "a fixed real-time exposure"}
+    if job.variants:
+        out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in job.variants}
+    return out
+
+def write_transforms(job: "SceneJob") -> None:
+    _write_transforms_file(job.dir, job.intr, job.t_us, job.poses, job.kept, job.windows, job.cfg.frames.test_every,
+                     job.cfg.render.fps)
