@@ -149,13 +149,13 @@ def sha256_file(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
-def link_tree(src: str | os.PathLike, dst: str | os.PathLike) -> None:
-    """Every file under src at the same place under dst: a hard link, or a copy where the file system
-    refuses links (another device). An existing file at dst is replaced."""
+def link_tree(src: str | os.PathLike, dst: str | os.PathLike, pattern: str = "*") -> None:
+    """Every file under src (matching `pattern`) at the same place under dst: a hard link, or a copy
+    where the file system refuses links (another device). An existing file at dst is replaced."""
     import shutil
 
     src, dst = Path(src), Path(dst)
-    for f in sorted(p for p in src.rglob("*") if p.is_file()):
+    for f in sorted(p for p in src.rglob(pattern) if p.is_file()):
         target = dst / f.relative_to(src)
         target.parent.mkdir(parents=True, exist_ok=True)
         if target.exists():

@@ -81,6 +81,7 @@ class SceneJob:
         self.dynamic: dict[tuple[int, int], np.ndarray] = {}     # (camera, kept index) -> dynamic mask (test views)
         self.windows: dict[str, dict[int, tuple[int, int]]] = {}
         self.fingerprint = scene_folder.config_fingerprint(cfg)
+        self.ground_truth: dict | None = None     # the manifest's ground_truth entry, once written
 
     # -- files -------------------------------------------------------------------------------
     def is_complete(self) -> bool:
@@ -166,11 +167,20 @@ class SceneJob:
         for job, (_, job_spools, _), secs in zip(self.jobs, streams, seconds):
             for spool in job_spools:
                 spool.finish(t_end_us=int(job.t_us[-1]))
+        if cfg.ground_truth:                        # after the loop: the frames it checks the flow against exist
+            from datagen.ground_truth_files import write_ground_truth
+
+            self.ground_truth = write_ground_truth(self, cfg.ground_truth)
+            seconds[0]["ground_truth"] = self.ground_truth["seconds"]
         seconds[0]["total"] += time.perf_counter() - t_start
         for variant, secs in zip(self.variants, seconds[1:]):   # before the scene's manifest, which marks completion
             t0 = time.perf_counter()
             for part in ("frames", "rgb", "gray"):        # the same sharp frames: hard links where possible
                 link_tree(self.dir / part, variant.dir / part)
+            if self.ground_truth:
+                from datagen.ground_truth_files import share_with_variant
+
+                variant.ground_truth = share_with_variant(self.dir, variant.dir, variant.cfg.speed, self.ground_truth)
             secs["write"] += time.perf_counter() - t0
             secs["total"] = secs["simulate"] + secs["write"]      # its own work; the render is the scene's
             variant._write_metadata(secs)

@@ -157,19 +157,30 @@ class GeometrySampler:
     def cast_hits(self, snapshot, c2w: np.ndarray, K: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """`cast`, and which of the N rays hit (bool [N], in the order of the M points). A hit on a
         deforming part is (its triangle, b1, b2) instead of a point in the part's frame."""
+        s = self.surface(snapshot, c2w, K, pixels)
+        return s.local, s.obj, s.hit
+
+    def surface(self, snapshot, c2w: np.ndarray, K: np.ndarray, pixels: np.ndarray):
+        """Everything the rays through pixels [N, 2] meet (datagen.ground_truth.ViewSurface): which
+        hit, and per hit its point in its part's frame (or triangle and barycentric coordinates on
+        a deforming part), its part, its world point and its world face normal."""
+        from datagen.ground_truth import ViewSurface
+
         bvh, owner, mats, firsts, parts = snapshot
         rays = np.concatenate([pixels, np.ones((len(pixels), 1))], 1) @ np.linalg.inv(K).T @ c2w[:3, :3].T
         origin = mathutils.Vector(c2w[:3, 3].tolist())
         cast, Vector = bvh.ray_cast, mathutils.Vector
-        pts, faces, hit = [], [], np.zeros(len(rays), bool)
+        pts, normals, faces, hit = [], [], [], np.zeros(len(rays), bool)
         for n, d in enumerate(rays.tolist()):
-            loc, _normal, face, _dist = cast(origin, Vector(d))
+            loc, normal, face, _dist = cast(origin, Vector(d))
             if face is not None:
                 pts.append(tuple(loc))
+                normals.append(tuple(normal))
                 faces.append(face)
                 hit[n] = True
         if not pts:
-            return np.zeros((0, 3)), np.zeros(0, np.int64), hit
+            empty = np.zeros((0, 3))
+            return ViewSurface(hit, empty, np.zeros(0, np.int64), empty, empty)
         pts, faces = np.array(pts, np.float64), np.array(faces, np.int64)
         idx = owner[faces]
         inv = np.linalg.inv(mats[idx])
@@ -181,7 +192,7 @@ class GeometrySampler:
                 f = faces[sel] - firsts[o]
                 b1, b2 = barycentric(pts[sel], world[tri[f, 0]], world[tri[f, 1]], world[tri[f, 2]])
                 local[sel] = np.stack([f.astype(np.float64), b1, b2], -1)
-        return local, idx, hit
+        return ViewSurface(hit, local, idx, pts, np.array(normals, np.float64))
 
 
 def deform_check_taus(tau: np.ndarray) -> np.ndarray:
@@ -229,3 +240,24 @@ def dynamic_masks(tau: np.ndarray, views: list[tuple[int, int]], poses: np.ndarr
             out[(k, i)] = mask_image(hit, surface_motion_px(local, obj, motion, poses[k, i], K[0, 0], i),
                                      width, height, threshold_px)
     return out
+
+
+class SurfaceTracer:
+    """The ground truth's raw material for the scene currently built (datagen.ground_truth): its parts'
+    names, their motion over the rendered times tau [T] (blur_geometry.PartMotion), and what every
+    pixel's ray meets in a view at one time. TopologyChangeError names a part whose mesh topology
+    changes (its surface points cannot be tracked)."""
+
+    def __init__(self, tau: np.ndarray):
+        self.tau = tau
+        self.sampler = GeometrySampler()
+        self.sampler.find_deforming(deform_check_taus(tau))
+        self.motion = self.sampler.motion(tau)
+        self.names = [o.name for o in self.sampler.objects]
+
+    def views_at(self, i: int, c2w: dict[int, np.ndarray], K: np.ndarray, width: int, height: int) -> dict:
+        """{camera k: ViewSurface} at rendered-time index i for the cameras' OpenCV poses c2w {k: [4, 4]}."""
+        R.set_time(float(self.tau[i]))
+        snap = self.sampler.snapshot()
+        pixels = pixel_grid(width, height, 1)
+        return {k: self.sampler.surface(snap, pose, K, pixels) for k, pose in sorted(c2w.items())}

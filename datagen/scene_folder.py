@@ -36,7 +36,8 @@ FORMAT_VERSION = 1
 def config_fingerprint(cfg: SceneConfig) -> str:
     """What a finished scene folder was made with. A scene built in code leaves `source` out, so
     folders generated before scenes could come from files keep their fingerprint; `formats` (extra
-    exports, datagen.exports) changes nothing in the scene and is left out; `blur.fit` is left out
+    exports, datagen.exports) changes nothing in the scene and is left out, and so is `ground_truth`
+    when off; `blur.fit` is left out
     at its default, so folders generated before it existed keep theirs."""
     import yaml
 
@@ -46,6 +47,8 @@ def config_fingerprint(cfg: SceneConfig) -> str:
     if not cfg.source.file:
         data.pop("source")
     data.pop("formats")
+    if not cfg.ground_truth:                        # off: folders generated before it keep their fingerprint
+        data.pop("ground_truth")
     if not cfg.blur.fit:
         data["blur"].pop("fit")
     if not cfg.render.adaptive_px:                  # every frame rendered: max_stride says nothing
@@ -120,6 +123,7 @@ def write_metadata(job: "SceneJob", seconds: dict) -> None:
                    "events_per_camera": n_events},
         "events_per_second_per_camera": [round(n / cfg.real_duration_s) for n in n_events],
         "blur": blur,
+        **({"ground_truth": job.ground_truth} if job.ground_truth else {}),
         **speed_manifest(job),
         **({"render_plan": job.render_plan} if job.render_plan.get("adaptive_px") else {}),
         "seconds": {k: round(v, 3) for k, v in seconds.items()},

@@ -236,6 +236,9 @@ class SourceConfig:
 SCENE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,127}")
 
 
+GROUND_TRUTH_KINDS = ("depth", "flow", "normals", "ids")   # datagen.ground_truth, docs/reference/dataset_layout.md
+
+
 @dataclass(frozen=True)
 class SceneConfig:
     name: str
@@ -255,6 +258,8 @@ class SceneConfig:
     source: SourceConfig = field(default_factory=SourceConfig)   # built in code, or a file's scene
     # extra event formats written beside the HDF5 (datagen.exports; eventio.formats.FORMATS but h5)
     formats: tuple[str, ...] = ()
+    # per-pixel ground truth of every kept frame (datagen.ground_truth): any of GROUND_TRUTH_KINDS
+    ground_truth: tuple[str, ...] = ()
 
     def __post_init__(self):
         check_positive(self, "duration_s")
@@ -271,6 +276,12 @@ class SceneConfig:
                                   f"{', '.join(f for f in FORMATS if f != 'h5')}; the HDF5 is always written)")
         if len(set(self.formats)) != len(self.formats):
             raise ConfigError(f"formats: a format is named twice ({list(self.formats)})")
+        for kind in self.ground_truth:
+            if kind not in GROUND_TRUTH_KINDS:
+                raise ConfigError(f"ground_truth: {kind!r} is not a kind of ground truth (expected any of "
+                                  f"{', '.join(GROUND_TRUTH_KINDS)})")
+        if len(set(self.ground_truth)) != len(self.ground_truth):
+            raise ConfigError(f"ground_truth: a kind is named twice ({list(self.ground_truth)})")
         if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
             raise ConfigError(f"motion_strength: expected a value >= 0, got {self.motion_strength!r}")
         if self.duration_s * self.render.fps > MAX_TIMESTAMPS:

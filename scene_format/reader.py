@@ -63,6 +63,21 @@ class FrameRecord:
         return f"cam{self.camera}/{self.index:05d}"
 
 
+@dataclass(frozen=True)
+class GroundTruth:
+    """One kept frame's per-pixel ground truth (what the scene's `ground_truth` asked for; None where
+    absent). Conventions: the manifest's `ground_truth.conventions`, docs/reference/dataset_layout.md."""
+    camera: int
+    index: int
+    depth_m: np.ndarray | None = None          # float32 [H, W] z-depth, metres; 0 = no surface
+    normals: np.ndarray | None = None          # float32 [H, W, 3] unit, camera frame (OpenCV); 0 = no surface
+    ids: np.ndarray | None = None              # uint16 [H, W] 1 + part index (objects()); 0 = no surface
+    flow_px: np.ndarray | None = None          # float32 [H, W, 2] to kept frame index + 1 (None for the last)
+    flow_valid: np.ndarray | None = None       # bool [H, W]
+    flow_occluded: np.ndarray | None = None    # bool [H, W]
+    flow_px_per_ms: np.ndarray | None = None   # float32 [H, W, 2] instantaneous image velocity
+
+
 def read_json(path: Path, raw: bytes | None = None):
     """A dataset's JSON file (or its bytes `raw`, already read); a missing or malformed one is a
     DatasetError naming it."""
@@ -150,6 +165,42 @@ class SceneDataset:
 
     def event_file(self, camera: int) -> Path:
         return self.dir / "events" / f"cam{camera}.h5"
+
+    @property
+    def ground_truth_kinds(self) -> tuple[str, ...]:
+        """Which per-pixel ground truth the scene holds (depth, flow, normals, ids); () for none."""
+        return tuple((self.manifest.get("ground_truth") or {}).get("kinds", ()))
+
+    def objects(self) -> dict[int, str]:
+        """{object id: part name} of the ids ground truth (0, no surface, is not listed)."""
+        gt = self.manifest.get("ground_truth") or {}
+        return {int(k): v for k, v in gt.get("objects", {}).items()}
+
+    def ground_truth(self, camera: int, index: int) -> GroundTruth:
+        """Kept frame `index` of `camera`'s ground truth as typed arrays (DatasetError when the scene
+        has none, or the frame is not one of its kept frames)."""
+        from common.imageio import read_exr
+
+        kinds = self.ground_truth_kinds
+        if not kinds:
+            raise DatasetError(f"{self.dir}: no ground truth (generate it with `ground_truth: [depth, flow, normals, "
+                               "ids]` in the scene's or the preset's config)")
+        root, name = self.dir / "ground_truth", f"cam{camera}/{index:05d}"
+        if not (camera in range(self.n_cameras) and any((root / k / f"cam{camera}").glob(f"{index:05d}.*") for k in kinds)):
+            raise DatasetError(f"{self.dir}: no ground truth for camera {camera}, kept frame {index}")
+        out = {}
+        if "depth" in kinds:
+            out["depth_m"] = read_exr(root / "depth" / f"{name}.exr")
+        if "normals" in kinds:
+            out["normals"] = read_exr(root / "normals" / f"{name}.exr")
+        if "ids" in kinds:
+            out["ids"] = cv2.imread(str(root / "ids" / f"{name}.png"), cv2.IMREAD_UNCHANGED)
+        if "flow" in kinds:
+            with np.load(root / "flow" / f"{name}.npz") as z:
+                out["flow_px_per_ms"] = z["instant_px_per_ms"]
+                if "forward_px" in z.files:
+                    out.update(flow_px=z["forward_px"], flow_valid=z["valid"], flow_occluded=z["occluded"])
+        return GroundTruth(camera, index, **out)
 
     def pose(self, camera: int, t_us) -> np.ndarray:
         """OpenCV camera-to-world [4, 4] of a camera at any time inside the clip."""

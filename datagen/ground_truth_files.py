@@ -1,0 +1,138 @@
+"""Write a scene's per-pixel ground truth (datagen.ground_truth) beside its frames, after the render
+loop, for every kept frame of every camera:
+
+    ground_truth/objects.json              {"1": part name, ...}; id 0 = no surface; units and conventions
+    ground_truth/depth/cam<k>/<j>.exr      float32 z-depth, metres, camera frame; 0 = no surface
+    ground_truth/normals/cam<k>/<j>.exr    float32 R,G,B = unit normal (x, y, z) in the camera frame; 0 = none
+    ground_truth/ids/cam<k>/<j>.png        uint16 object id
+    ground_truth/flow/cam<k>/<j>.png       DSEC-Flow 16-bit PNG: forward flow to kept frame j + 1 (not for the last)
+    ground_truth/flow/cam<k>/<j>.npz       float32 forward_px [H, W, 2], valid, occluded (j + 1 exists);
+                                           instant_px_per_ms [H, W, 2] (every j)
+
+and returns the manifest's `ground_truth` entry (kinds, rate, conventions, the brightness-constancy
+check: PSNR of frame j against frame j + 1 warped back by the flow, over valid pixels).
+"""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+from common.fileio import write_text_atomic
+from common.imageio import read_exr, write_exr, write_png
+from datagen import ground_truth as G
+
+CONVENTIONS = {
+    "pixels": "pixel (x, y) is the ray through (x + 0.5, y + 0.5); OpenCV camera axes (x right, y down, z forward)",
+    "depth": "z-depth in metres along the camera's z axis (not the ray length); 0 where no surface is seen",
+    "normals": "unit face normals in the camera frame, turned to face the camera; 0 where no surface is seen",
+    "ids": "1 + the index of the scene part seen (objects.json names them); 0 where no surface is seen",
+    "flow": "forward: where the surface point seen at a pixel of kept frame j is at kept frame j + 1, minus the "
+            "pixel (camera and object motion); valid where it is in front of the camera, inside the image and not "
+            "occluded (the later depth map nearer by more than 2 %); DSEC-Flow PNG: channels (x, y, valid), "
+            "value = flow * 128 + 2**15. instant_px_per_ms: image velocity of the point by a central difference "
+            "over the neighbouring rendered timestamps, pixels per millisecond of this folder's time",
+}
+
+
+def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
+    """Every kept frame's ground truth of `kinds` for the scene currently built (job: a SceneJob)."""
+    from datagen.render_geometry import SurfaceTracer
+
+    t0 = time.perf_counter()
+    cfg, d = job.cfg, job.dir / "ground_truth"
+    W, H, C, K = cfg.render.width, cfg.render.height, cfg.camera.n_cameras, job.intr.K
+    dt_ms = 1000.0 / cfg.real_fps                        # real time between rendered frames
+    T = len(job.tau)
+    tracer = SurfaceTracer(job.tau)
+    objects = {str(n + 1): name for n, name in enumerate(tracer.names)}
+    write_text_atomic(d / "objects.json", json.dumps({"objects": objects, "conventions": CONVENTIONS}, indent=1))
+    flow = "flow" in kinds
+    warp, identity = [], []
+    prev = None                                         # (j, i, {k: ViewSurface}, {k: instant})
+    for j, i in enumerate(job.kept.tolist()):
+        surf = tracer.views_at(i, {k: job.poses[k, i] for k in range(C)}, K, W, H)
+        depth = {k: G.depth_image(s, job.poses[k, i], W, H) for k, s in surf.items()}
+        for k, s in surf.items():
+            name = f"cam{k}/{j:05d}"
+            if "depth" in kinds:
+                write_exr(d / "depth" / f"{name}.exr", depth[k])
+            if "normals" in kinds:
+                write_exr(d / "normals" / f"{name}.exr", G.normal_image(s, job.poses[k, i], W, H))
+            if "ids" in kinds:
+                write_png(d / "ids" / f"{name}.png", G.id_image(s, W, H))
+        instant = {}
+        if flow:
+            a, b = max(i - 1, 0), min(i + 1, T - 1)
+            for k, s in surf.items():
+                uv, _z = G.track_uv(s, tracer.motion, job.poses[k], K, np.array([a, b]))
+                instant[k] = G.instant_flow(uv[0], uv[1], (b - a) * dt_ms, s.hit, W, H)
+            if prev is not None:
+                _write_forward(job, d, prev, i, surf, depth, tracer.motion, warp, identity)
+        prev = (j, surf, instant)
+    if flow and prev is not None:                       # the last kept frame: its instantaneous flow only
+        for k, v in prev[2].items():
+            _save_npz(d / "flow" / f"cam{k}" / f"{prev[0]:05d}.npz", instant_px_per_ms=v)
+    seconds = time.perf_counter() - t0
+    out = {"kinds": list(kinds), "frames": "every kept frame of every camera",
+           "rate_fps": round(cfg.real_fps / cfg.frames.keep_every, 6), "objects": objects,
+           "conventions": {k: CONVENTIONS[k] for k in ("pixels", *kinds)}, "seconds": round(seconds, 3)}
+    if warp:
+        out["warp_check"] = {"psnr_db_warped": round(float(np.mean(warp)), 3),
+                             "psnr_db_unwarped": round(float(np.mean(identity)), 3), "views": len(warp),
+                             "what": "kept frame j against frame j + 1 warped back by the forward flow (linear "
+                                     "light, clipped to [0, 1]), over the flow's valid pixels; unwarped: the same "
+                                     "pixels without the flow"}
+    log(f"{cfg.name}: ground truth ({', '.join(kinds)}) of {len(job.kept)} kept frames x {C} cameras in {seconds:.0f} s")
+    return out
+
+
+def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, warp: list, identity: list) -> None:
+    """The forward flow from the previous kept frame to this one (rendered index i1), per camera."""
+    j0, surf0, instant0 = prev
+    cfg, K = job.cfg, job.intr.K
+    W, H = cfg.render.width, cfg.render.height
+    for k, s in surf0.items():
+        uv, z = G.track_uv(s, motion, job.poses[k], K, np.array([i1]))
+        fwd, valid, occluded = G.forward_flow(s, uv[0], z[0], depth1[k], W, H)
+        folder = d / "flow" / f"cam{k}"
+        write_png(folder / f"{j0:05d}.png", G.encode_dsec_flow(fwd, valid))
+        _save_npz(folder / f"{j0:05d}.npz", forward_px=fwd, valid=valid, occluded=occluded,
+                  instant_px_per_ms=instant0[k])
+        if valid.any():
+            f0 = np.clip(read_exr(job.dir / "frames" / f"cam{k}" / f"{j0:05d}.exr"), 0, 1)
+            f1 = np.clip(read_exr(job.dir / "frames" / f"cam{k}" / f"{j0 + 1:05d}.exr"), 0, 1)
+            warp.append(G.masked_psnr(f0, G.warp_backward(f1, fwd), valid))
+            identity.append(G.masked_psnr(f0, f1, valid))
+
+
+def _save_npz(path, **arrays) -> None:
+    from common.fileio import atomic_output
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+
+
+def share_with_variant(scene_dir, variant_dir, speed: float, summary: dict) -> dict:
+    """A speed variant shows its scene's frames: the same depth, normals, ids and forward flow (hard
+    links); its instantaneous flow is the scene's times the speed factor (its time runs `speed` times
+    faster). Returns the variant's manifest entry."""
+    from common.fileio import link_tree
+
+    src, dst = scene_dir / "ground_truth", variant_dir / "ground_truth"
+    for part in ("depth", "normals", "ids"):
+        if (src / part).is_dir():
+            link_tree(src / part, dst / part)
+    if (src / "flow").is_dir():
+        link_tree(src / "flow", dst / "flow", pattern="*.png")
+    for f in sorted((src / "flow").rglob("*.npz")) if (src / "flow").is_dir() else []:
+        with np.load(f) as z:
+            arrays = {key: z[key] for key in z.files}
+        arrays["instant_px_per_ms"] = (arrays["instant_px_per_ms"] * speed).astype(np.float32)
+        _save_npz(dst / f.relative_to(src), **arrays)
+    write_text_atomic(dst / "objects.json", (src / "objects.json").read_text())
+    return {**summary, "rate_fps": round(summary["rate_fps"] * speed, 6), "shared_with": scene_dir.name,
+            "seconds": 0.0}

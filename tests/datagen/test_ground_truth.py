@@ -1,0 +1,238 @@
+"""Per-pixel ground truth (depth, normals, ids, flow) against answers not computed by the code under
+test: a board at a known depth sliding at a known speed, the same board moved by a shape key, a camera
+sweeping past a static scene (flow from depth and pose alone), DSEC's own PNG convention."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from datagen import ground_truth as G
+from datagen.blur_geometry import PartMotion
+
+ROOT = Path(__file__).resolve().parents[2]
+ALL = ["depth", "flow", "normals", "ids"]
+
+
+def generate(out: Path, scene: str, scene_yaml: Path, preset: Path) -> Path:
+    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", scene, "--scene-config", str(scene_yaml),
+                        "--preset", str(preset), "--out", str(out), "--no-progress"],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return out / scene
+
+
+def board(tmp_path_factory, name: str) -> Path:
+    """blur_plane (or its shape-key twin) with every kind of ground truth."""
+    out = tmp_path_factory.mktemp(name)
+    cfg = yaml.safe_load((ROOT / "blender_scenes" / f"{name}.yaml").read_text())
+    cfg["ground_truth"] = ALL
+    (out / "scene.yaml").write_text(yaml.safe_dump(cfg))
+    (out / "preset.yaml").write_text(f"scenes: [{name}]\n")
+    return generate(out / "data", name, out / "scene.yaml", out / "preset.yaml")
+
+
+@pytest.fixture(scope="module")
+def plane(tmp_path_factory):
+    return board(tmp_path_factory, "blur_plane")
+
+
+def _fx(scene: Path) -> float:
+    return json.loads((scene / "cameras.json").read_text())["intrinsics"]["fx"]
+
+
+def test_a_board_at_a_known_depth_gives_that_depth_its_normal_and_its_id_at_every_pixel(plane):
+    from blender_scenes import blur_plane as B
+    from scene_format.reader import SceneDataset
+
+    d = SceneDataset(plane)
+    assert d.ground_truth_kinds == tuple(ALL) and list(d.objects().values()) == ["face"]
+    worst = 0.0
+    for j in range(len(d.frames("train")) + len(d.frames("test"))):
+        g = d.ground_truth(0, j)
+        worst = max(worst, float(np.abs(g.depth_m - B.FRONT_DEPTH_M).max()))
+        assert np.all(g.ids == 1)
+        assert np.abs(g.normals - np.array([0, 0, -1], np.float32)).max() < 1e-6    # facing the camera
+    assert worst < 2e-6, worst        # the ray cast runs in single precision: 3.99 m to a few ulp
+    print(f"board: max |depth - {B.FRONT_DEPTH_M}| = {worst:.2e} m")
+
+
+def test_a_sliding_board_has_the_analytic_flow_and_image_velocity(plane):
+    """The board slides TRAVEL_M along +y (image +x for this camera) over the clip at depth Z: between
+    kept frames keep_every rendered frames apart it moves fx * dy / Z px; its image velocity is
+    fx * v / Z px per second of real time."""
+    from blender_scenes import blur_plane as B
+    from scene_format.reader import SceneDataset
+
+    d = SceneDataset(plane)
+    cfg = d.config
+    t_end_s = (cfg.n_timestamps - 1) / cfg.real_fps
+    dy = B.TRAVEL_M * cfg.frames.keep_every / (cfg.n_timestamps - 1)
+    fx = _fx(plane)
+    expect_px = fx * dy / B.FRONT_DEPTH_M
+    expect_px_per_ms = fx * (B.TRAVEL_M / t_end_s) / B.FRONT_DEPTH_M / 1000.0
+    n = len(json.loads((plane / "manifest.json").read_text())["files"])
+    assert n > 0
+    kept = cfg.n_timestamps // cfg.frames.keep_every + 1
+    epe = []
+    for j in range(kept):
+        g = d.ground_truth(0, j)
+        assert np.abs(g.flow_px_per_ms[..., 0] - expect_px_per_ms).max() < 0.01 * expect_px_per_ms
+        assert np.abs(g.flow_px_per_ms[..., 1]).max() < 1e-3
+        if j == kept - 1:
+            assert g.flow_px is None                     # no later kept frame
+            continue
+        x = np.arange(g.flow_px.shape[1]) + 0.5
+        inside = np.broadcast_to(x + expect_px < g.flow_px.shape[1], g.flow_valid.shape)
+        assert np.array_equal(g.flow_valid, inside) and not g.flow_occluded.any()   # leaving the image: invalid
+        err = np.hypot(g.flow_px[..., 0] - expect_px, g.flow_px[..., 1])[inside]
+        epe.append(float(err.max()))
+    assert max(epe) < 0.01, epe
+    print(f"board: flow {expect_px:.4f} px between kept frames, max end-point error {max(epe):.2e} px")
+
+
+def test_the_flow_png_reads_back_through_dsecs_loader_convention(plane):
+    """DSEC's loader: cv2 (BGR) flipped to RGB, x = (R - 2**15) / 128, y = (G - 2**15) / 128, valid = B."""
+    from scene_format.reader import SceneDataset
+
+    g = SceneDataset(plane).ground_truth(0, 0)
+    png = cv2.imread(str(plane / "ground_truth" / "flow" / "cam0" / "00000.png"), cv2.IMREAD_UNCHANGED)
+    assert png.dtype == np.uint16 and png.shape == g.flow_px.shape[:2] + (3,)
+    rgb = png[..., ::-1].astype(np.float32)
+    flow = np.stack([(rgb[..., 0] - 2 ** 15) / 128.0, (rgb[..., 1] - 2 ** 15) / 128.0], -1)
+    assert np.array_equal(rgb[..., 2] == 1, g.flow_valid)
+    assert np.abs(flow - g.flow_px)[g.flow_valid].max() <= 0.5 / 128 + 1e-6
+
+
+def test_the_same_board_moved_by_a_shape_key_has_the_same_ground_truth(plane, tmp_path_factory):
+    """blur_plane_deform moves the board's vertices by a shape key (the object never moves): its
+    points are tracked by triangle and barycentric coordinates, and every map equals the rigid board's."""
+    from scene_format.reader import SceneDataset
+
+    rigid, deform = SceneDataset(plane), SceneDataset(board(tmp_path_factory, "blur_plane_deform"))
+    for j in (0, 2):
+        a, b = rigid.ground_truth(0, j), deform.ground_truth(0, j)
+        assert np.abs(a.depth_m - b.depth_m).max() < 1e-5
+        assert np.abs(a.flow_px - b.flow_px).max() < 1e-3
+        assert np.abs(a.flow_px_per_ms - b.flow_px_per_ms).max() < 1e-3
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    """The tiny preset's cubes held still (motion_strength 0) while the two cameras sweep past them."""
+    out = tmp_path_factory.mktemp("sweep")
+    preset = yaml.safe_load((ROOT / "configs" / "datasets" / "tiny.yaml").read_text())
+    preset["overrides"].update(motion_strength=0.0, ground_truth=["depth", "flow", "ids"])
+    preset["overrides"]["blur"]["fit"] = True          # the camera sweep alone blurs less than the targets
+    (out / "preset.yaml").write_text(yaml.safe_dump(preset))
+    return generate(out / "data", "cubes", ROOT / "blender_scenes" / "cubes.yaml", out / "preset.yaml")
+
+
+def test_a_camera_moving_past_a_static_scene_has_the_ego_motion_flow_of_depth_and_pose(sweep):
+    """Back-project each pixel with its depth through the camera's pose at kept frame j, project it
+    with the pose at j + 1: the stored flow equals that to 0.01 px away from object edges."""
+    from scene_format.reader import SceneDataset
+
+    d = SceneDataset(sweep)
+    cfg = d.config
+    K = d.intrinsics.K
+    h, w = cfg.render.height, cfg.render.width
+    x, y = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    rays = np.stack([x, y, np.ones_like(x)], -1) @ np.linalg.inv(K).T
+    worst, checked = 0.0, 0
+    for k in range(d.n_cameras):
+        times = d.cameras[k].times_us
+        for j in range(len(times[::cfg.frames.keep_every]) - 1):
+            g = d.ground_truth(k, j)
+            i0, i1 = j * cfg.frames.keep_every, (j + 1) * cfg.frames.keep_every
+            c0, c1 = d.pose(k, times[i0]), d.pose(k, times[i1])
+            world = (rays * g.depth_m[..., None]) @ c0[:3, :3].T + c0[:3, 3]
+            cam1 = (world - c1[:3, 3]) @ c1[:3, :3]
+            uv1 = cam1[..., :2] / cam1[..., 2:] * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+            expect = uv1 - np.stack([x, y], -1)
+            ids = g.ids.astype(np.int64)
+            inner = np.ones_like(g.flow_valid)
+            for dy_ in (-1, 0, 1):
+                for dx_ in (-1, 0, 1):
+                    inner &= np.roll(np.roll(ids, dy_, 0), dx_, 1) == ids
+            sel = g.flow_valid & inner & (ids > 0)
+            sel[[0, -1], :] = sel[:, [0, -1]] = False
+            if sel.any():
+                worst = max(worst, float(np.abs(g.flow_px - expect)[sel].max()))
+                checked += int(sel.sum())
+    assert checked > 500 and worst < 0.01, (checked, worst)
+    print(f"ego-motion: {checked} pixels, max |flow - analytic| {worst:.2e} px")
+
+
+def test_the_warped_frame_matches_the_next_and_the_manifest_lists_every_file(sweep):
+    m = json.loads((sweep / "manifest.json").read_text())
+    check = m["ground_truth"]["warp_check"]
+    assert check["psnr_db_warped"] > check["psnr_db_unwarped"] + 3, check
+    gt_files = [f for f in m["files"] if f.startswith("ground_truth/")]
+    on_disk = sorted(str(p.relative_to(sweep)) for p in (sweep / "ground_truth").rglob("*") if p.is_file())
+    assert sorted(gt_files) == on_disk and len(on_disk) > 20
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "check", str(sweep)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
+    victim = sweep / "ground_truth" / "depth" / "cam0" / "00001.exr"
+    saved = victim.read_bytes()
+    try:
+        victim.write_bytes(saved[:-1] + bytes([saved[-1] ^ 1]))
+        r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "check", str(sweep)], capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 1 and "ground_truth/depth/cam0/00001.exr" in r.stdout + r.stderr
+    finally:
+        victim.write_bytes(saved)
+
+
+# ---- pure functions ------------------------------------------------------------------------------
+
+def test_dsec_encoding_round_trips_to_half_a_step_and_refuses_what_does_not_fit():
+    rng = np.random.default_rng(0)
+    flow = rng.uniform(-250, 250, (6, 7, 2))
+    valid = rng.random((6, 7)) > 0.3
+    back, v = G.decode_dsec_flow(G.encode_dsec_flow(flow, valid))
+    assert np.array_equal(v, valid) and np.abs(back - flow)[valid].max() <= 0.5 / 128
+    assert np.all(back[~valid] == 0)
+    with pytest.raises(ValueError, match="does not fit"):
+        G.encode_dsec_flow(np.full((1, 1, 2), 300.0), np.ones((1, 1), bool))
+
+
+def test_backward_warp_of_a_shifted_image_is_the_image():
+    rng = np.random.default_rng(1)
+    img = rng.random((10, 12))
+    shifted = np.roll(img, 2, axis=1)                  # frame 1: everything 2 px to the right
+    warped = G.warp_backward(shifted, np.broadcast_to([2.0, 0.0], (10, 12, 2)))
+    assert np.allclose(warped[:, :10], img[:, :10])
+
+
+def test_a_point_hidden_at_the_later_time_is_occluded_and_one_leaving_the_image_is_invalid():
+    hit = np.array([True, True, True, False])           # a 2 x 2 view; the last pixel sees nothing
+    s = G.ViewSurface(hit, np.zeros((3, 3)), np.zeros(3, np.int64), np.zeros((3, 3)), np.zeros((3, 3)))
+    uv1 = np.array([[1.5, 0.5], [0.5, 1.5], [5.0, 0.5]])      # pixel (1, 0), pixel (0, 1), outside
+    z1 = np.array([2.0, 2.0, 2.0])
+    depth1 = np.array([[2.0, 2.0], [1.0, 0.0]], np.float32)   # (0, 1) is nearer at the later time
+    flow, valid, occluded = G.forward_flow(s, uv1, z1, depth1, 2, 2)
+    assert valid.tolist() == [[True, False], [False, False]]
+    assert occluded.tolist() == [[False, True], [False, False]]
+    assert flow[0, 0].tolist() == [1.0, 0.0]
+
+
+def test_instant_flow_is_the_central_difference_in_px_per_ms():
+    uv0, uv1 = np.array([[1.0, 1.0]]), np.array([[3.0, 0.0]])
+    v = G.instant_flow(uv0, uv1, 0.5, np.array([True, False]), 2, 1)
+    assert v[0, 0].tolist() == [4.0, -2.0] and v[0, 1].tolist() == [0.0, 0.0]
+
+
+def test_tracking_a_rigid_part_follows_its_matrix():
+    """track_uv carries a surface point with its part's matrix: a part translated by 1 m along x in
+    front of a camera at the origin looking along +z moves fx / z px."""
+    K = np.array([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]])
+    mats = np.repeat(np.eye(4)[None, None], 2, 0)
+    mats[1, 0, 0, 3] = 1.0
+    s = G.ViewSurface(np.array([True]), np.array([[0.0, 0.0, 4.0]]), np.array([0]), np.array([[0.0, 0.0, 4.0]]),
+                      np.array([[0.0, 0.0, -1.0]]))
+    uv, z = G.track_uv(s, PartMotion(mats, {}), np.repeat(np.eye(4)[None], 2, 0), K, np.array([0, 1]))
+    assert uv[1, 0, 0] - uv[0, 0, 0] == pytest.approx(25.0) and z[1, 0] == pytest.approx(4.0)
