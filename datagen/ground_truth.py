@@ -26,8 +26,6 @@ import numpy as np
 from datagen.blur_geometry import NEAR_M, project_tracks, track_world
 from scene_format.config import GROUND_TRUTH_KINDS as KINDS  # noqa: F401  (re-exported)
 
-DSEC_SCALE = 128.0          # DSEC-Flow PNG: value = flow * 128 + 2**15 (uint16), third channel = valid
-DSEC_OFFSET = 2 ** 15
 OCCLUSION_REL = 0.02        # a tracked point is occluded where the later depth map is nearer by > 2 %
 
 
@@ -115,25 +113,6 @@ def instant_flow(uv_prev: np.ndarray, uv_next: np.ndarray, dt_ms: float, hit: np
     v = (uv_next - uv_prev) / dt_ms
     v = np.where(np.all(np.isfinite(v), 1)[:, None], v, 0.0)
     return _image(hit, v, width, height, np.float32)
-
-
-def encode_dsec_flow(flow: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """uint16 [H, W, 3] in DSEC-Flow's PNG convention: channels (x, y, valid), x and y as
-    flow * 128 + 2**15 (so flows within +-256 px keep 1/128 px), valid 1 / 0. ValueError beyond it."""
-    scaled = np.round(flow * DSEC_SCALE) + DSEC_OFFSET
-    if valid.any() and (scaled[valid].min() < 0 or scaled[valid].max() > 65535):
-        raise ValueError(f"flow of {np.abs(flow[valid]).max():.1f} px does not fit DSEC's 16-bit PNG (+-256 px)")
-    out = np.zeros(flow.shape[:2] + (3,), np.uint16)
-    out[..., :2] = np.where(valid[..., None], np.clip(scaled, 0, 65535), DSEC_OFFSET)
-    out[..., 2] = valid
-    return out
-
-
-def decode_dsec_flow(png: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(flow float64 [H, W, 2], valid bool [H, W]) from a DSEC-Flow PNG array (x, y, valid), exactly as
-    DSEC's loader reads it: (value - 2**15) / 128."""
-    png = png.astype(np.float64)
-    return (png[..., :2] - DSEC_OFFSET) / DSEC_SCALE, png[..., 2] > 0
 
 
 def warp_backward(image1: np.ndarray, flow: np.ndarray) -> np.ndarray:

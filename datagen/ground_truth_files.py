@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from common.fileio import write_text_atomic
+from common.flow import encode_dsec_flow
 from common.imageio import read_exr, write_exr, write_png
 from datagen import ground_truth as G
 
@@ -97,7 +98,7 @@ def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, war
         uv, z = G.track_uv(s, motion, job.poses[k], K, np.array([i1]))
         fwd, valid, occluded = G.forward_flow(s, uv[0], z[0], depth1[k], W, H)
         folder = d / "flow" / f"cam{k}"
-        write_png(folder / f"{j0:05d}.png", G.encode_dsec_flow(fwd, valid))
+        write_png(folder / f"{j0:05d}.png", encode_dsec_flow(fwd, valid))
         _save_npz(folder / f"{j0:05d}.npz", forward_px=fwd, valid=valid, occluded=occluded,
                   instant_px_per_ms=instant0[k])
         if valid.any():

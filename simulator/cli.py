@@ -206,6 +206,9 @@ def add_view_parser(sub) -> None:
     p.add_argument("--scale", type=positive_int, default=None,
                    help="enlarge each pixel this many times (default: enough for ~640 px wide, small sensors grow)")
     p.add_argument("--plain", action="store_true", help="no time label or colour key under the image")
+    p.add_argument("--flow", type=Path, default=None,
+                   help="draw this optical flow over the events as arrows (green): a ground-truth flow file of a scene, "
+                        "ground_truth/flow/cam<k>/<j>.png (DSEC-Flow) or .npz, of the sensor's size")
     p.set_defaults(func=run_view)
 
 
@@ -213,7 +216,7 @@ def run_view(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from eventio.event_file import EventFile
     from eventio.h5io import EventFileError
-    from simulator.event_pictures import annotate, event_frame, parse_time_us, save_video, window_starts
+    from simulator.event_pictures import annotate, event_frame, overlay_flow, parse_time_us, save_video, window_starts
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)
@@ -229,8 +232,20 @@ def run_view(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: --scale {scale}: the picture would be {ev.width * scale}x{ev.height * scale} "
                              f"pixels; at most {MAX_VIEW_SIDE} a side (--scale <= {max(1, MAX_VIEW_SIDE // max(ev.width, ev.height))})")
 
+        flow = None
+        if args.flow is not None:
+            from common.flow import read_flow
+
+            flow = read_flow(args.flow)
+            if flow[0].shape[:2] != (ev.height, ev.width):
+                raise SystemExit(f"error: --flow {args.flow}: {flow[0].shape[1]}x{flow[0].shape[0]} pixels, the events "
+                                 f"{ev.width}x{ev.height}")
+
         def draw(stream, a: int, b: int):
             frame = event_frame(stream)
+            if flow is not None:
+                frame = overlay_flow(frame, *flow, scale=scale)
+                return frame if args.plain else annotate(frame, a, b)
             return frame if args.plain else annotate(frame, a, b, scale)
         t0 = parse_time_us(args.t0) if args.t0 is not None else start
         t1 = parse_time_us(args.t1) if args.t1 is not None else end

@@ -61,6 +61,28 @@ def event_frame(stream: EventStream, saturate_count: int = 3) -> np.ndarray:
     return np.round(img).astype(np.uint8)
 
 
+FLOW_RGB = (0, 140, 0)      # arrows of a drawn flow: dark green, apart from ON red and OFF blue
+
+
+def overlay_flow(frame: np.ndarray, flow: np.ndarray, valid: np.ndarray, scale: int = 1, step_px: int = 8) -> np.ndarray:
+    """The event frame scaled up `scale` times (nearest), with a flow [H, W, 2] (px, at the sensor's
+    resolution) drawn as arrows from every step_px-th valid pixel centre to where it goes."""
+    import cv2
+
+    if flow.shape[:2] != frame.shape[:2]:
+        raise ValueError(f"the flow is {flow.shape[1]}x{flow.shape[0]} pixels, the events {frame.shape[1]}x{frame.shape[0]}")
+    img = np.ascontiguousarray(np.repeat(np.repeat(frame, scale, 0), scale, 1) if scale > 1 else frame)
+    h, w = flow.shape[:2]
+    for y in range(step_px // 2, h, step_px):
+        for x in range(step_px // 2, w, step_px):
+            if valid[y, x]:
+                a = ((x + 0.5) * scale, (y + 0.5) * scale)
+                b = ((x + 0.5 + flow[y, x, 0]) * scale, (y + 0.5 + flow[y, x, 1]) * scale)
+                cv2.arrowedLine(img, tuple(int(round(v)) for v in a), tuple(int(round(v)) for v in b), FLOW_RGB, 1,
+                                cv2.LINE_AA, tipLength=0.3)
+    return img
+
+
 def annotate(frame: np.ndarray, t0_us: int, t1_us: int, scale: int = 1) -> np.ndarray:
     """The event frame scaled up `scale` times (nearest), over a strip with its time window and the
     colour key (ON red, OFF blue)."""

@@ -91,3 +91,22 @@ def unmount(folder) -> None:
     import subprocess
 
     subprocess.run(["umount", str(folder)], check=True)
+
+
+@pytest.fixture(scope="session")
+def gt_scene(tmp_path_factory):
+    """The tiny preset's cubes with every kind of ground truth (depth, flow, normals, ids; ~4 s)."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    root = Path(__file__).resolve().parent.parent
+    out = tmp_path_factory.mktemp("gt_scene")
+    preset = yaml.safe_load((root / "configs" / "datasets" / "tiny.yaml").read_text())
+    preset["overrides"]["ground_truth"] = ["depth", "flow", "normals", "ids"]
+    (out / "preset.yaml").write_text(yaml.safe_dump(preset))
+    r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(out / "preset.yaml"),
+                        "--out", str(out / "data"), "--no-progress"], capture_output=True, text=True, cwd=root)
+    assert r.returncode == 0, r.stderr
+    return out / "data" / "cubes"

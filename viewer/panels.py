@@ -1,5 +1,6 @@
 """What the viewer shows of a dataset camera at a time: its sharp frame, each blur level's frame (with
-its exposure and measured blur), and its event frame over a window, as labelled uint8 images.
+its exposure and measured blur), its event frame over a window, and, where the scene has ground
+truth, the frame's depth and optical flow (colour wheel), as labelled uint8 images.
 
     panels = ScenePanels(SceneDataset("data/quick/hinge"))
     for p in panels.at(camera=2, t_us=40_000, window_us=2_000): ...   # Panel(title, image [H, W, 3])
@@ -104,7 +105,29 @@ class ScenePanels:
         t0 = max(0, t1 - int(window_us))
         panels.append(Panel(f"events {t0 / 1000:.2f}-{t1 / 1000:.2f} ms (ON red, OFF blue)",
                             self.event_image(camera, t0, t1)))
+        if rec is not None and self.dataset.ground_truth_kinds:
+            panels += self.ground_truth_panels(rec)
         return panels
+
+    def ground_truth_panels(self, rec: FrameRecord) -> list[Panel]:
+        """Depth and flow pictures of a kept frame (what the scene's ground truth holds)."""
+        from common.flow import depth_to_rgb, flow_to_rgb
+
+        gt = self.dataset.ground_truth(rec.camera, rec.index)
+        out = []
+        if gt.depth_m is not None:
+            seen = gt.depth_m[gt.depth_m > 0]
+            span = f"{seen.min():.2f}-{seen.max():.2f} m" if seen.size else "no surface"
+            out.append(Panel(f"depth, frame {rec.index}: {span} (near bright)", depth_to_rgb(gt.depth_m)))
+        if gt.flow_px is not None:
+            top = float(np.hypot(*gt.flow_px[gt.flow_valid].T).max()) if gt.flow_valid.any() else 0.0
+            out.append(Panel(f"flow to frame {rec.index + 1}: up to {top:.1f} px (hue: direction, "
+                             "saturation: speed; black: invalid)", flow_to_rgb(gt.flow_px, gt.flow_valid)))
+        elif gt.flow_px_per_ms is not None:
+            v = gt.flow_px_per_ms
+            out.append(Panel(f"image velocity, frame {rec.index} (last kept frame): px/ms",
+                             flow_to_rgb(v, np.any(v != 0, -1))))
+        return out
 
     def close(self) -> None:
         for f in self._events.values():

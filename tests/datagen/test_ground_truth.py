@@ -189,17 +189,6 @@ def test_the_warped_frame_matches_the_next_and_the_manifest_lists_every_file(swe
 
 # ---- pure functions ------------------------------------------------------------------------------
 
-def test_dsec_encoding_round_trips_to_half_a_step_and_refuses_what_does_not_fit():
-    rng = np.random.default_rng(0)
-    flow = rng.uniform(-250, 250, (6, 7, 2))
-    valid = rng.random((6, 7)) > 0.3
-    back, v = G.decode_dsec_flow(G.encode_dsec_flow(flow, valid))
-    assert np.array_equal(v, valid) and np.abs(back - flow)[valid].max() <= 0.5 / 128
-    assert np.all(back[~valid] == 0)
-    with pytest.raises(ValueError, match="does not fit"):
-        G.encode_dsec_flow(np.full((1, 1, 2), 300.0), np.ones((1, 1), bool))
-
-
 def test_backward_warp_of_a_shifted_image_is_the_image():
     rng = np.random.default_rng(1)
     img = rng.random((10, 12))
