@@ -180,7 +180,7 @@ class SceneJob:
             if self.ground_truth:
                 from datagen.ground_truth_files import share_with_variant
 
-                variant.ground_truth = share_with_variant(self.dir, variant.dir, variant.cfg.speed, self.ground_truth)
+                variant.ground_truth = share_with_variant(self, variant, self.ground_truth)
             secs["write"] += time.perf_counter() - t0
             secs["total"] = secs["simulate"] + secs["write"]      # its own work; the render is the scene's
             variant._write_metadata(secs)

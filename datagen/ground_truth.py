@@ -115,6 +115,18 @@ def instant_flow(uv_prev: np.ndarray, uv_next: np.ndarray, dt_ms: float, hit: np
     return _image(hit, v, width, height, np.float32)
 
 
+def event_labels(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, frame_times_us: np.ndarray,
+                 ids: np.ndarray) -> np.ndarray:
+    """uint16 [N]: the object id at each event's pixel in the kept frame nearest its time (events
+    t_us, x, y [N]; frame_times_us [J] increasing; ids [J, H, W]). Between kept frames a moving edge
+    may hand a pixel to another object: the label is the nearest frame's."""
+    last = len(frame_times_us) - 1
+    after = np.clip(np.searchsorted(frame_times_us, t_us), 0, last)         # the first frame at or after t
+    before = np.clip(after - 1, 0, last)
+    j = np.where(np.abs(t_us - frame_times_us[before]) <= np.abs(frame_times_us[after] - t_us), before, after)
+    return ids[j, y.astype(np.int64), x.astype(np.int64)]
+
+
 def warp_backward(image1: np.ndarray, flow: np.ndarray) -> np.ndarray:
     """image1 sampled at each pixel + its flow (bilinear, edges clamped): the later frame warped back
     onto the earlier one (the brightness-constancy check). image1 [H, W] or [H, W, C]."""

@@ -8,6 +8,8 @@ loop, for every kept frame of every camera:
     ground_truth/flow/cam<k>/<j>.png       DSEC-Flow 16-bit PNG: forward flow to kept frame j + 1 (not for the last)
     ground_truth/flow/cam<k>/<j>.npz       float32 forward_px [H, W, 2], valid, occluded (j + 1 exists);
                                            instant_px_per_ms [H, W, 2] (every j)
+    ground_truth/event_ids/cam<k>.npy      uint16 [N]: the object id at each event's pixel (in the event
+                                           file's order), from the kept frame nearest its time (with ids)
 
 and returns the manifest's `ground_truth` entry (kinds, rate, conventions, the brightness-constancy
 check: PSNR of frame j against frame j + 1 warped back by the flow, over valid pixels).
@@ -51,6 +53,7 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     write_text_atomic(d / "objects.json", json.dumps({"objects": objects, "conventions": CONVENTIONS}, indent=1))
     flow = "flow" in kinds
     warp, identity = [], []
+    ids_by_camera = {k: [] for k in range(C)}          # the event labels' look-up (with ids)
     prev = None                                         # (j, i, {k: ViewSurface}, {k: instant})
     for j, i in enumerate(job.kept.tolist()):
         surf = tracer.views_at(i, {k: job.poses[k, i] for k in range(C)}, K, W, H)
@@ -62,7 +65,8 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
             if "normals" in kinds:
                 write_exr(d / "normals" / f"{name}.exr", G.normal_image(s, job.poses[k, i], W, H))
             if "ids" in kinds:
-                write_png(d / "ids" / f"{name}.png", G.id_image(s, W, H))
+                ids_by_camera[k].append(G.id_image(s, W, H))
+                write_png(d / "ids" / f"{name}.png", ids_by_camera[k][-1])
         instant = {}
         if flow:
             a, b = max(i - 1, 0), min(i + 1, T - 1)
@@ -75,10 +79,16 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     if flow and prev is not None:                       # the last kept frame: its instantaneous flow only
         for k, v in prev[2].items():
             _save_npz(d / "flow" / f"cam{k}" / f"{prev[0]:05d}.npz", instant_px_per_ms=v)
+    events_by_object = None
+    if "ids" in kinds:
+        frame_times = job.t_us[job.kept]
+        events_by_object = [label_events(job.dir, d, k, frame_times, np.stack(ids_by_camera[k]), objects) for k in range(C)]
     seconds = time.perf_counter() - t0
     out = {"kinds": list(kinds), "frames": "every kept frame of every camera",
            "rate_fps": round(cfg.real_fps / cfg.frames.keep_every, 6), "objects": objects,
            "conventions": {k: CONVENTIONS[k] for k in ("pixels", *kinds)}, "seconds": round(seconds, 3)}
+    if events_by_object is not None:
+        out["events_by_object"] = events_by_object
     if warp:
         out["warp_check"] = {"psnr_db_warped": round(float(np.mean(warp)), 3),
                              "psnr_db_unwarped": round(float(np.mean(identity)), 3), "views": len(warp),
@@ -108,6 +118,26 @@ def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, war
             identity.append(G.masked_psnr(f0, f1, valid))
 
 
+def label_events(scene_dir, d, camera: int, frame_times_us: np.ndarray, ids: np.ndarray, objects: dict) -> dict:
+    """Write ground_truth/event_ids/cam<k>.npy (each event's object id, datagen.ground_truth.event_labels)
+    and return the camera's event count per object name ("none": pixels that see no surface)."""
+    from eventio.event_file import EventFile
+
+    with EventFile(scene_dir / "events" / f"cam{camera}.h5") as ev:
+        t = ev.times(0, ev.n)
+        x, y, _p = ev.rows(0, ev.n)
+    labels = G.event_labels(t, x, y, frame_times_us, ids).astype(np.uint16)
+    path = d / "event_ids" / f"cam{camera}.npy"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    from common.fileio import atomic_output
+
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as f:
+            np.save(f, labels)
+    counts = np.bincount(labels, minlength=len(objects) + 1)
+    return {"none" if i == 0 else objects[str(i)]: int(n) for i, n in enumerate(counts)}
+
+
 def _save_npz(path, **arrays) -> None:
     from common.fileio import atomic_output
 
@@ -117,23 +147,33 @@ def _save_npz(path, **arrays) -> None:
             np.savez_compressed(f, **arrays)
 
 
-def share_with_variant(scene_dir, variant_dir, speed: float, summary: dict) -> dict:
+def share_with_variant(scene_job, variant_job, summary: dict) -> dict:
     """A speed variant shows its scene's frames: the same depth, normals, ids and forward flow (hard
-    links); its instantaneous flow is the scene's times the speed factor (its time runs `speed` times
-    faster). Returns the variant's manifest entry."""
+    links); its instantaneous flow is the scene's times the speed factor (its time runs that much
+    faster), and its own events are labelled at its own times. Returns the variant's manifest entry."""
+    import cv2
+
     from common.fileio import link_tree
 
-    src, dst = scene_dir / "ground_truth", variant_dir / "ground_truth"
+    src, dst, speed = scene_job.dir / "ground_truth", variant_job.dir / "ground_truth", variant_job.cfg.speed
     for part in ("depth", "normals", "ids"):
         if (src / part).is_dir():
             link_tree(src / part, dst / part)
     if (src / "flow").is_dir():
         link_tree(src / "flow", dst / "flow", pattern="*.png")
-    for f in sorted((src / "flow").rglob("*.npz")) if (src / "flow").is_dir() else []:
-        with np.load(f) as z:
-            arrays = {key: z[key] for key in z.files}
-        arrays["instant_px_per_ms"] = (arrays["instant_px_per_ms"] * speed).astype(np.float32)
-        _save_npz(dst / f.relative_to(src), **arrays)
+        for f in sorted((src / "flow").rglob("*.npz")):
+            with np.load(f) as z:
+                arrays = {key: z[key] for key in z.files}
+            arrays["instant_px_per_ms"] = (arrays["instant_px_per_ms"] * speed).astype(np.float32)
+            _save_npz(dst / f.relative_to(src), **arrays)
     write_text_atomic(dst / "objects.json", (src / "objects.json").read_text())
-    return {**summary, "rate_fps": round(summary["rate_fps"] * speed, 6), "shared_with": scene_dir.name,
-            "seconds": 0.0}
+    out = {**summary, "rate_fps": round(summary["rate_fps"] * speed, 6), "shared_with": scene_job.dir.name,
+           "seconds": 0.0}
+    out.pop("warp_check", None)                    # measured on the scene's frames, which it shares
+    if "events_by_object" in summary:
+        frame_times = variant_job.t_us[variant_job.kept]
+        out["events_by_object"] = []
+        for k in range(variant_job.cfg.camera.n_cameras):
+            ids = np.stack([cv2.imread(str(f), cv2.IMREAD_UNCHANGED) for f in sorted((src / "ids" / f"cam{k}").glob("*.png"))])
+            out["events_by_object"].append(label_events(variant_job.dir, dst, k, frame_times, ids, summary["objects"]))
+    return out

@@ -225,3 +225,25 @@ def test_tracking_a_rigid_part_follows_its_matrix():
                       np.array([[0.0, 0.0, -1.0]]))
     uv, z = G.track_uv(s, PartMotion(mats, {}), np.repeat(np.eye(4)[None], 2, 0), K, np.array([0, 1]))
     assert uv[1, 0, 0] - uv[0, 0, 0] == pytest.approx(25.0) and z[1, 0] == pytest.approx(4.0)
+
+
+def test_an_event_takes_the_id_of_its_pixel_in_the_nearest_kept_frame():
+    ids = np.zeros((3, 1, 2), np.uint16)
+    ids[0, 0, 0], ids[1, 0, 0], ids[2, 0, 1] = 1, 2, 3            # frames at 0, 100, 200 us
+    t = np.array([0, 49, 50, 51, 170, 250, -5])
+    x = np.array([0, 0, 0, 0, 1, 1, 0])
+    labels = G.event_labels(t, x, np.zeros(7, np.int64), np.array([0, 100, 200]), ids)
+    assert labels.tolist() == [1, 1, 1, 2, 3, 3, 1]               # a tie goes to the earlier frame
+
+
+def test_every_event_is_labelled_and_the_counts_add_up(gt_scene):
+    from eventio.event_file import EventFile
+
+    m = json.loads((gt_scene / "manifest.json").read_text())
+    by_object = m["ground_truth"]["events_by_object"]
+    for k, counts in enumerate(by_object):
+        labels = np.load(gt_scene / "ground_truth" / "event_ids" / f"cam{k}.npy")
+        with EventFile(gt_scene / "events" / f"cam{k}.h5") as ev:
+            assert len(labels) == ev.n == sum(counts.values()) == m["counts"]["events_per_camera"][k]
+        assert set(counts) == {"none", *m["ground_truth"]["objects"].values()}
+        assert counts["none"] < 0.5 * len(labels)                  # most events come from the moving cubes
