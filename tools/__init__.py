@@ -15,4 +15,7 @@ root as `python -m tools.<name>` (they are not installed with the package).
     bench_adaptive     adaptive temporal sampling against rendering every frame (docs/design/dataset.md)
     dataset_summary    a generated dataset's times, events, sizes and blur levels (docs/design/dataset.md)
     bench_viewer       the browser viewer's frame and event throughput (docs/guides/viewer.md)
+    ground_truth_summary  a dataset's ground truth: cost, warp check, events per object, one view drawn
+                       (docs/results/dataset.md)
+    docs_reference     the generated CLI and config reference pages (docs/reference/)
 """

@@ -1,0 +1,91 @@
+"""Summarise the ground truth of generated scenes (prints a table) and draw one view of it:
+
+    python -m tools.ground_truth_summary data/quick_gt [--picture out.png --scene hinge --camera 0 --frame 5]
+
+Per scene: the kinds, the seconds the ground truth took against the scene's other seconds, its bytes
+against the folder's, the brightness-constancy check (PSNR of a kept frame against the next one
+warped back by the flow, over the valid pixels; unwarped beside it) and the share of events per object.
+The picture: the sharp frame, depth, forward flow (colour wheel) and the events around the frame with
+the flow drawn as arrows, as the viewer and `e4dgs draw-events --flow` show them.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from tools.tool_cli import existing_folder, run_tool
+
+
+def _bytes(path: Path) -> int:
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def table(root: Path) -> list[str]:
+    lines = ["| scene | kinds | GT s | other s | GT MB | scene MB | warp PSNR (unwarped) dB | events per object (cam0) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for d in sorted(p for p in root.iterdir() if (p / "manifest.json").exists()):
+        m = json.loads((d / "manifest.json").read_text())
+        gt = m.get("ground_truth")
+        if not gt or gt.get("shared_with"):
+            continue
+        s = m["seconds"]
+        other = s.get("total", 0.0) - s.get("ground_truth", 0.0)
+        w = gt.get("warp_check", {})
+        warp = f"{w['psnr_db_warped']:.2f} ({w['psnr_db_unwarped']:.2f})" if w else "-"
+        by = (gt.get("events_by_object") or [{}])[0]
+        n = max(sum(by.values()), 1)
+        shares = ", ".join(f"{k} {100 * v / n:.0f} %" for k, v in sorted(by.items(), key=lambda kv: -kv[1])[:4])
+        lines.append(f"| {d.name} | {', '.join(gt['kinds'])} | {s.get('ground_truth', 0):.0f} | {other:.0f} | "
+                     f"{_bytes(d / 'ground_truth') / 1e6:.1f} | {_bytes(d) / 1e6:.1f} | {warp} | {shares} |")
+    return lines
+
+
+def picture(scene: Path, camera: int, frame: int, out: Path) -> Path:
+    import cv2
+
+    from common.flow import depth_to_rgb, flow_to_rgb
+    from common.imageio import write_png
+    from scene_format.reader import SceneDataset
+    from simulator.event_pictures import event_frame, overlay_flow
+    from viewer.panels import ScenePanels, to_uint8_rgb
+
+    d = SceneDataset(scene)
+    panels = ScenePanels(d)
+    rec = next(r for r in panels.sharp[camera] if r.index == frame)
+    gt = d.ground_truth(camera, frame)
+    nxt = next(r for r in panels.sharp[camera] if r.index == frame + 1)
+    events = panels.events(camera).window(rec.t_us, nxt.t_us)
+    tiles = [to_uint8_rgb(d.load_image(rec.path)), depth_to_rgb(gt.depth_m), flow_to_rgb(gt.flow_px, gt.flow_valid),
+             overlay_flow(event_frame(events), gt.flow_px, gt.flow_valid, scale=1, step_px=12)]
+    labels = [f"{scene.name} cam{camera} frame {frame}", "depth (near bright)", f"flow to frame {frame + 1}",
+              f"events {rec.t_us / 1000:.2f}-{nxt.t_us / 1000:.2f} ms + flow"]
+    h, w = tiles[0].shape[:2]
+    row = []
+    for t, label in zip(tiles, labels):
+        strip = np.full((18, w, 3), 255, np.uint8)
+        cv2.putText(strip, label, (3, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+        row.append(np.concatenate([t, strip], 0))
+    panels.close()
+    return write_png(out, np.concatenate(row, 1))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("root", type=existing_folder, help="a dataset root generated with ground_truth")
+    ap.add_argument("--picture", type=Path, default=None, help="also draw one view (PNG)")
+    ap.add_argument("--scene", default=None, help="with --picture: the scene folder's name")
+    ap.add_argument("--camera", type=int, default=0, help="with --picture (default 0)")
+    ap.add_argument("--frame", type=int, default=5, help="with --picture: a kept frame with a next one (default 5)")
+    args = ap.parse_args(argv)
+    print("\n".join(table(args.root)))
+    if args.picture is not None:
+        scene = args.root / (args.scene or next(p.name for p in sorted(args.root.iterdir()) if (p / "manifest.json").exists()))
+        print(f"wrote {picture(scene, args.camera, args.frame, args.picture)}")
+    return 0
+
+
+if __name__ == "__main__":
+    run_tool(main)
