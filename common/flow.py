@@ -36,9 +36,9 @@ def decode_dsec_flow(png: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_flow(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """(flow [H, W, 2] px, valid [H, W]) from a DSEC-Flow PNG or a ground-truth .npz (its forward_px
-    and valid; or instant_px_per_ms, valid where nonzero, when it has no forward flow). ValueError
-    naming the file otherwise."""
+    """(flow [H, W, 2] px, valid [H, W]) from a DSEC-Flow PNG or a ground-truth .npz (a flow file's
+    forward_px and valid; a velocity file's px_per_ms, valid where nonzero). ValueError naming the
+    file otherwise."""
     import cv2
 
     path = Path(path)
@@ -47,7 +47,7 @@ def read_flow(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
             with np.load(path) as z:
                 if "forward_px" in z.files:
                     return z["forward_px"].astype(np.float64), z["valid"].astype(bool)
-                v = z["instant_px_per_ms"].astype(np.float64)
+                v = z["px_per_ms"].astype(np.float64)
                 return v, np.any(v != 0, -1)
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a ground-truth flow file ({exc})") from None

@@ -6,9 +6,9 @@ loop, for every kept frame of every camera:
     ground_truth/normals/cam<k>/<j>.exr    float32 R,G,B = unit normal (x, y, z) in the camera frame; 0 = none
     ground_truth/ids/cam<k>/<j>.png        uint16 object id
     ground_truth/flow/cam<k>/<j>.png       DSEC-Flow 16-bit PNG: forward flow to kept frame j + 1 (not for the last)
-    ground_truth/flow/cam<k>/<j>.npz       float32 forward_px [H, W, 2], valid, occluded (j + 1 exists);
-                                           instant_px_per_ms [H, W, 2] (every j)
-    ground_truth/event_ids/cam<k>.npy      uint16 [N]: the object id at each event's pixel (in the event
+    ground_truth/flow/cam<k>/<j>.npz       float32 forward_px [H, W, 2], bool valid, occluded (j + 1 exists)
+    ground_truth/velocity/cam<k>/<j>.npz   float32 px_per_ms [H, W, 2]: image velocity at kept frame j (with flow)
+    ground_truth/event_ids/cam<k>.npy      uint8 / uint16 [N]: the object id at each event's pixel (in the event
                                            file's order), from the kept frame nearest its time (with ids)
 
 and returns the manifest's `ground_truth` entry (kinds, rate, conventions, the brightness-constancy
@@ -34,8 +34,10 @@ CONVENTIONS = {
     "flow": "forward: where the surface point seen at a pixel of kept frame j is at kept frame j + 1, minus the "
             "pixel (camera and object motion); valid where it is in front of the camera, inside the image and not "
             "occluded (the later depth map nearer by more than 2 %); DSEC-Flow PNG: channels (x, y, valid), "
-            "value = flow * 128 + 2**15. instant_px_per_ms: image velocity of the point by a central difference "
-            "over the neighbouring rendered timestamps, pixels per millisecond of this folder's time",
+            "value = flow * 128 + 2**15",
+    "velocity": "px_per_ms: image velocity of the point seen at each pixel, by a central difference over the "
+                "neighbouring rendered timestamps, pixels per millisecond of the scene's time (a speed variant's: "
+                "times its speed factor; it keeps no velocity files of its own)",
 }
 
 
@@ -54,7 +56,7 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     flow = "flow" in kinds
     warp, identity = [], []
     ids_by_camera = {k: [] for k in range(C)}          # the event labels' look-up (with ids)
-    prev = None                                         # (j, i, {k: ViewSurface}, {k: instant})
+    prev = None                                         # (j, {k: ViewSurface})
     for j, i in enumerate(job.kept.tolist()):
         surf = tracer.views_at(i, {k: job.poses[k, i] for k in range(C)}, K, W, H)
         depth = {k: G.depth_image(s, job.poses[k, i], W, H) for k, s in surf.items()}
@@ -67,18 +69,15 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
             if "ids" in kinds:
                 ids_by_camera[k].append(G.id_image(s, W, H))
                 write_png(d / "ids" / f"{name}.png", ids_by_camera[k][-1])
-        instant = {}
         if flow:
             a, b = max(i - 1, 0), min(i + 1, T - 1)
             for k, s in surf.items():
                 uv, _z = G.track_uv(s, tracer.motion, job.poses[k], K, np.array([a, b]))
-                instant[k] = G.instant_flow(uv[0], uv[1], (b - a) * dt_ms, s.hit, W, H)
+                _save_npz(d / "velocity" / f"cam{k}" / f"{j:05d}.npz",
+                          px_per_ms=G.instant_flow(uv[0], uv[1], (b - a) * dt_ms, s.hit, W, H))
             if prev is not None:
                 _write_forward(job, d, prev, i, surf, depth, tracer.motion, warp, identity)
-        prev = (j, surf, instant)
-    if flow and prev is not None:                       # the last kept frame: its instantaneous flow only
-        for k, v in prev[2].items():
-            _save_npz(d / "flow" / f"cam{k}" / f"{prev[0]:05d}.npz", instant_px_per_ms=v)
+        prev = (j, surf)
     events_by_object = None
     if "ids" in kinds:
         frame_times = job.t_us[job.kept]
@@ -86,7 +85,8 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     seconds = time.perf_counter() - t0
     out = {"kinds": list(kinds), "frames": "every kept frame of every camera",
            "rate_fps": round(cfg.real_fps / cfg.frames.keep_every, 6), "objects": objects,
-           "conventions": {k: CONVENTIONS[k] for k in ("pixels", *kinds)}, "seconds": round(seconds, 3)}
+           "conventions": {k: CONVENTIONS[k] for k in ("pixels", *kinds, *(("velocity",) if flow else ()))},
+           "seconds": round(seconds, 3)}
     if events_by_object is not None:
         out["events_by_object"] = events_by_object
     if warp:
@@ -101,7 +101,7 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
 
 def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, warp: list, identity: list) -> None:
     """The forward flow from the previous kept frame to this one (rendered index i1), per camera."""
-    j0, surf0, instant0 = prev
+    j0, surf0 = prev
     cfg, K = job.cfg, job.intr.K
     W, H = cfg.render.width, cfg.render.height
     for k, s in surf0.items():
@@ -109,8 +109,7 @@ def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, war
         fwd, valid, occluded = G.forward_flow(s, uv[0], z[0], depth1[k], W, H)
         folder = d / "flow" / f"cam{k}"
         write_png(folder / f"{j0:05d}.png", encode_dsec_flow(fwd, valid))
-        _save_npz(folder / f"{j0:05d}.npz", forward_px=fwd, valid=valid, occluded=occluded,
-                  instant_px_per_ms=instant0[k])
+        _save_npz(folder / f"{j0:05d}.npz", forward_px=fwd, valid=valid, occluded=occluded)
         if valid.any():
             f0 = np.clip(read_exr(job.dir / "frames" / f"cam{k}" / f"{j0:05d}.exr"), 0, 1)
             f1 = np.clip(read_exr(job.dir / "frames" / f"cam{k}" / f"{j0 + 1:05d}.exr"), 0, 1)
@@ -126,7 +125,7 @@ def label_events(scene_dir, d, camera: int, frame_times_us: np.ndarray, ids: np.
     with EventFile(scene_dir / "events" / f"cam{camera}.h5") as ev:
         t = ev.times(0, ev.n)
         x, y, _p = ev.rows(0, ev.n)
-    labels = G.event_labels(t, x, y, frame_times_us, ids).astype(np.uint16)
+    labels = G.event_labels(t, x, y, frame_times_us, ids).astype(np.uint8 if len(objects) < 256 else np.uint16)
     path = d / "event_ids" / f"cam{camera}.npy"
     path.parent.mkdir(parents=True, exist_ok=True)
     from common.fileio import atomic_output
@@ -149,8 +148,9 @@ def _save_npz(path, **arrays) -> None:
 
 def share_with_variant(scene_job, variant_job, summary: dict) -> dict:
     """A speed variant shows its scene's frames: the same depth, normals, ids and forward flow (hard
-    links); its instantaneous flow is the scene's times the speed factor (its time runs that much
-    faster), and its own events are labelled at its own times. Returns the variant's manifest entry."""
+    links); its image velocity is the scene's times the speed factor (its time runs that much faster:
+    no files of its own, the reader scales the scene's), and its own events are labelled at its own
+    times. Returns the variant's manifest entry."""
     import cv2
 
     from common.fileio import link_tree
@@ -160,15 +160,10 @@ def share_with_variant(scene_job, variant_job, summary: dict) -> dict:
         if (src / part).is_dir():
             link_tree(src / part, dst / part)
     if (src / "flow").is_dir():
-        link_tree(src / "flow", dst / "flow", pattern="*.png")
-        for f in sorted((src / "flow").rglob("*.npz")):
-            with np.load(f) as z:
-                arrays = {key: z[key] for key in z.files}
-            arrays["instant_px_per_ms"] = (arrays["instant_px_per_ms"] * speed).astype(np.float32)
-            _save_npz(dst / f.relative_to(src), **arrays)
+        link_tree(src / "flow", dst / "flow")
     write_text_atomic(dst / "objects.json", (src / "objects.json").read_text())
     out = {**summary, "rate_fps": round(summary["rate_fps"] * speed, 6), "shared_with": scene_job.dir.name,
-           "seconds": 0.0}
+           "velocity_scale": speed, "seconds": 0.0}
     out.pop("warp_check", None)                    # measured on the scene's frames, which it shares
     if "events_by_object" in summary:
         frame_times = variant_job.t_us[variant_job.kept]

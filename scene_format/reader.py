@@ -75,7 +75,7 @@ class GroundTruth:
     flow_px: np.ndarray | None = None          # float32 [H, W, 2] to kept frame index + 1 (None for the last)
     flow_valid: np.ndarray | None = None       # bool [H, W]
     flow_occluded: np.ndarray | None = None    # bool [H, W]
-    flow_px_per_ms: np.ndarray | None = None   # float32 [H, W, 2] instantaneous image velocity
+    velocity_px_per_ms: np.ndarray | None = None   # float32 [H, W, 2] image velocity at the frame
 
 
 def read_json(path: Path, raw: bytes | None = None):
@@ -196,10 +196,16 @@ class SceneDataset:
         if "ids" in kinds:
             out["ids"] = cv2.imread(str(root / "ids" / f"{name}.png"), cv2.IMREAD_UNCHANGED)
         if "flow" in kinds:
-            with np.load(root / "flow" / f"{name}.npz") as z:
-                out["flow_px_per_ms"] = z["instant_px_per_ms"]
-                if "forward_px" in z.files:
+            forward = root / "flow" / f"{name}.npz"
+            if forward.exists():                        # every kept frame but the last
+                with np.load(forward) as z:
                     out.update(flow_px=z["forward_px"], flow_valid=z["valid"], flow_occluded=z["occluded"])
+            gt = self.manifest["ground_truth"]
+            source = self.dir.parent / gt["shared_with"] / "ground_truth" if gt.get("shared_with") else root
+            velocity = source / "velocity" / f"{name}.npz"
+            if velocity.exists():         # a speed variant's is its scene's, faster by its speed factor
+                with np.load(velocity) as z:
+                    out["velocity_px_per_ms"] = (z["px_per_ms"] * float(gt.get("velocity_scale", 1.0))).astype(np.float32)
         return GroundTruth(camera, index, **out)
 
     def pose(self, camera: int, t_us) -> np.ndarray:

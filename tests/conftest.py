@@ -95,7 +95,8 @@ def unmount(folder) -> None:
 
 @pytest.fixture(scope="session")
 def gt_scene(tmp_path_factory):
-    """The tiny preset's cubes with every kind of ground truth (depth, flow, normals, ids; ~4 s)."""
+    """The tiny preset's cubes with every kind of ground truth (depth, flow, normals, ids) and a speed
+    variant x4 beside it (data/cubes_x4; ~5 s)."""
     import subprocess
     import sys
 
@@ -105,6 +106,7 @@ def gt_scene(tmp_path_factory):
     out = tmp_path_factory.mktemp("gt_scene")
     preset = yaml.safe_load((root / "configs" / "datasets" / "tiny.yaml").read_text())
     preset["overrides"]["ground_truth"] = ["depth", "flow", "normals", "ids"]
+    preset["overrides"]["speeds"] = {"factors": [4], "exposure_ms": 0.3333, "max_px_per_frame": 10.0}
     (out / "preset.yaml").write_text(yaml.safe_dump(preset))
     r = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(out / "preset.yaml"),
                         "--out", str(out / "data"), "--no-progress"], capture_output=True, text=True, cwd=root)

@@ -123,8 +123,8 @@ class ScenePanels:
             top = float(np.hypot(*gt.flow_px[gt.flow_valid].T).max()) if gt.flow_valid.any() else 0.0
             out.append(Panel(f"flow to frame {rec.index + 1}: up to {top:.1f} px (hue: direction, "
                              "saturation: speed; black: invalid)", flow_to_rgb(gt.flow_px, gt.flow_valid)))
-        elif gt.flow_px_per_ms is not None:
-            v = gt.flow_px_per_ms
+        elif gt.velocity_px_per_ms is not None:
+            v = gt.velocity_px_per_ms
             out.append(Panel(f"image velocity, frame {rec.index} (last kept frame): px/ms",
                              flow_to_rgb(v, np.any(v != 0, -1))))
         return out

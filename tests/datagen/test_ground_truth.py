@@ -81,8 +81,8 @@ def test_a_sliding_board_has_the_analytic_flow_and_image_velocity(plane):
     epe = []
     for j in range(kept):
         g = d.ground_truth(0, j)
-        assert np.abs(g.flow_px_per_ms[..., 0] - expect_px_per_ms).max() < 0.01 * expect_px_per_ms
-        assert np.abs(g.flow_px_per_ms[..., 1]).max() < 1e-3
+        assert np.abs(g.velocity_px_per_ms[..., 0] - expect_px_per_ms).max() < 0.01 * expect_px_per_ms
+        assert np.abs(g.velocity_px_per_ms[..., 1]).max() < 1e-3
         if j == kept - 1:
             assert g.flow_px is None                     # no later kept frame
             continue
@@ -118,7 +118,7 @@ def test_the_same_board_moved_by_a_shape_key_has_the_same_ground_truth(plane, tm
         a, b = rigid.ground_truth(0, j), deform.ground_truth(0, j)
         assert np.abs(a.depth_m - b.depth_m).max() < 1e-5
         assert np.abs(a.flow_px - b.flow_px).max() < 1e-3
-        assert np.abs(a.flow_px_per_ms - b.flow_px_per_ms).max() < 1e-3
+        assert np.abs(a.velocity_px_per_ms - b.velocity_px_per_ms).max() < 1e-3
 
 
 @pytest.fixture(scope="module")
@@ -247,3 +247,21 @@ def test_every_event_is_labelled_and_the_counts_add_up(gt_scene):
             assert len(labels) == ev.n == sum(counts.values()) == m["counts"]["events_per_camera"][k]
         assert set(counts) == {"none", *m["ground_truth"]["objects"].values()}
         assert counts["none"] < 0.5 * len(labels)                  # most events come from the moving cubes
+
+
+def test_a_speed_variant_shares_the_maps_and_its_velocity_is_the_scenes_times_its_speed(gt_scene):
+    from scene_format.reader import SceneDataset
+
+    scene, variant = SceneDataset(gt_scene), SceneDataset(gt_scene.parent / "cubes_x4")
+    assert not (variant.dir / "ground_truth" / "velocity").exists()            # no copies of its own
+    for j in (0, 3):
+        a, b = scene.ground_truth(0, j), variant.ground_truth(0, j)
+        for field in ("depth_m", "normals", "ids", "flow_px", "flow_valid"):
+            assert np.array_equal(getattr(a, field), getattr(b, field)), field
+        assert np.allclose(b.velocity_px_per_ms, 4 * a.velocity_px_per_ms)
+        assert (variant.dir / "ground_truth" / "depth" / "cam0" / f"{j:05d}.exr").stat().st_ino == \
+            (scene.dir / "ground_truth" / "depth" / "cam0" / f"{j:05d}.exr").stat().st_ino   # a hard link
+    m = json.loads((variant.dir / "manifest.json").read_text())
+    counts = m["ground_truth"]["events_by_object"][0]               # its own events, labelled at its own times
+    assert sum(counts.values()) == m["counts"]["events_per_camera"][0]
+    assert m["ground_truth"]["shared_with"] == "cubes" and m["ground_truth"]["velocity_scale"] == 4
