@@ -1,7 +1,8 @@
 """A scene folder's files beside the render loop (datagen.generate.SceneJob): the kept frames, the
 metadata (cameras.json, transforms, scene.yaml, masks, previews), the manifest with every file's
 SHA-256 (written last: a folder without it is incomplete), the speed variants' manifests and the
-extra event formats. Each writer reads the job's state and writes; none renders or simulates.
+extra event formats. Each writer reads the job's state (`job`: a datagen.generate.SceneJob) and
+writes; none renders or simulates.
 """
 from __future__ import annotations
 
@@ -9,7 +10,6 @@ import hashlib
 import json
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,9 +26,6 @@ from eventio.h5io import read_info
 from scene_format.config import SceneConfig
 from scene_format.naming import SHUTTER_LEVEL
 from scene_format.transforms import write_transforms as _write_transforms_file
-
-if TYPE_CHECKING:
-    from datagen.generate import SceneJob
 
 FORMAT_VERSION = 1
 
@@ -71,7 +68,7 @@ def write_kept(folder: Path, k: int, j: int, rgb: np.ndarray) -> None:
     write_png_srgb(folder / "gray" / f"cam{k}" / f"{name}.png", rec709_luma(rgb))
 
 
-def write_exports(job: "SceneJob") -> None:
+def write_exports(job) -> None:
     """The extra formats the config asks for, of the scene and its variants (datagen.exports)."""
     if job.cfg.formats:
         from datagen.exports import ensure_exports
@@ -80,7 +77,7 @@ def write_exports(job: "SceneJob") -> None:
             ensure_exports(job.dir, job.cfg.formats)
 
 
-def write_metadata(job: "SceneJob", seconds: dict) -> None:
+def write_metadata(job, seconds: dict) -> None:
     cfg, d = job.cfg, job.dir
     t_write = time.perf_counter()
     C = cfg.camera.n_cameras
@@ -131,7 +128,7 @@ def write_metadata(job: "SceneJob", seconds: dict) -> None:
     }
     write_text_atomic(d / "manifest.json", json.dumps(manifest, indent=1))
 
-def speed_manifest(job: "SceneJob") -> dict:
+def speed_manifest(job) -> dict:
     """A variant's speed (factor, exposure, frames it integrates, real clip length); a scene's variants."""
     cfg = job.cfg
     out = {}
@@ -147,6 +144,6 @@ def speed_manifest(job: "SceneJob") -> dict:
         out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in job.variants}
     return out
 
-def write_transforms(job: "SceneJob") -> None:
+def write_transforms(job) -> None:
     _write_transforms_file(job.dir, job.intr, job.t_us, job.poses, job.kept, job.windows, job.cfg.frames.test_every,
                      job.cfg.render.fps)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from common.argtypes import nonnegative_int
 from tools.tool_cli import existing_folder, run_tool
 
 
@@ -53,10 +54,14 @@ def picture(scene: Path, camera: int, frame: int, out: Path) -> Path:
     from viewer.panels import ScenePanels, to_uint8_rgb
 
     d = SceneDataset(scene)
+    if camera >= d.n_cameras:
+        raise ValueError(f"--camera {camera}: {scene} has cameras 0 to {d.n_cameras - 1}")
     panels = ScenePanels(d)
-    rec = next(r for r in panels.sharp[camera] if r.index == frame)
+    recs = {r.index: r for r in panels.sharp[camera]}
+    if frame not in recs or frame + 1 not in recs:
+        raise ValueError(f"--frame {frame}: expected a kept frame with a next one (0 to {max(recs) - 1})")
+    rec, nxt = recs[frame], recs[frame + 1]
     gt = d.ground_truth(camera, frame)
-    nxt = next(r for r in panels.sharp[camera] if r.index == frame + 1)
     events = panels.events(camera).window(rec.t_us, nxt.t_us)
     tiles = [to_uint8_rgb(d.load_image(rec.path)), depth_to_rgb(gt.depth_m), flow_to_rgb(gt.flow_px, gt.flow_valid),
              overlay_flow(event_frame(events), gt.flow_px, gt.flow_valid, scale=1, step_px=12)]
@@ -77,8 +82,9 @@ def main(argv=None) -> int:
     ap.add_argument("root", type=existing_folder, help="a dataset root generated with ground_truth")
     ap.add_argument("--picture", type=Path, default=None, help="also draw one view (PNG)")
     ap.add_argument("--scene", default=None, help="with --picture: the scene folder's name")
-    ap.add_argument("--camera", type=int, default=0, help="with --picture (default 0)")
-    ap.add_argument("--frame", type=int, default=5, help="with --picture: a kept frame with a next one (default 5)")
+    ap.add_argument("--camera", type=nonnegative_int, default=0, help="with --picture (default 0)")
+    ap.add_argument("--frame", type=nonnegative_int, default=5,
+                    help="with --picture: a kept frame with a next one (default 5)")
     args = ap.parse_args(argv)
     print("\n".join(table(args.root)))
     if args.picture is not None:
