@@ -82,6 +82,7 @@ class SceneJob:
         self.windows: dict[str, dict[int, tuple[int, int]]] = {}
         self.fingerprint = scene_folder.config_fingerprint(cfg)
         self.ground_truth: dict | None = None     # the manifest's ground_truth entry, once written
+        self.ground_truth_ids: dict[int, np.ndarray] = {}   # camera -> [kept, H, W] object ids, once written
 
     # -- files -------------------------------------------------------------------------------
     def is_complete(self) -> bool:

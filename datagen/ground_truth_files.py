@@ -57,6 +57,7 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     warp, identity = [], []
     ids_by_camera = {k: [] for k in range(C)}          # the event labels' look-up (with ids)
     prev = None                                         # (j, {k: ViewSurface})
+    frames: dict = {}                                   # linear kept frames read for the warp check, each once
     for j, i in enumerate(job.kept.tolist()):
         surf = tracer.views_at(i, {k: job.poses[k, i] for k in range(C)}, K, W, H)
         depth = {k: G.depth_image(s, job.poses[k, i], W, H) for k, s in surf.items()}
@@ -76,12 +77,13 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
                 _save_npz(d / "velocity" / f"cam{k}" / f"{j:05d}.npz",
                           px_per_ms=G.instant_flow(uv[0], uv[1], (b - a) * dt_ms, s.hit, W, H))
             if prev is not None:
-                _write_forward(job, d, prev, i, surf, depth, tracer.motion, warp, identity)
+                _write_forward(job, d, prev, i, depth, tracer.motion, frames, warp, identity)
         prev = (j, surf)
     events_by_object = None
     if "ids" in kinds:
+        job.ground_truth_ids = {k: np.stack(v) for k, v in ids_by_camera.items()}   # the variants label with them too
         frame_times = job.t_us[job.kept]
-        events_by_object = [label_events(job.dir, d, k, frame_times, np.stack(ids_by_camera[k]), objects) for k in range(C)]
+        events_by_object = [label_events(job.dir, d, k, frame_times, job.ground_truth_ids[k], objects) for k in range(C)]
     seconds = time.perf_counter() - t0
     out = {"kinds": list(kinds), "frames": "every kept frame of every camera",
            "rate_fps": round(cfg.real_fps / cfg.frames.keep_every, 6), "objects": objects,
@@ -99,8 +101,9 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     return out
 
 
-def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, warp: list, identity: list) -> None:
-    """The forward flow from the previous kept frame to this one (rendered index i1), per camera."""
+def _write_forward(job, d, prev, i1: int, depth1: dict, motion, frames: dict, warp: list, identity: list) -> None:
+    """The forward flow from the previous kept frame to this one (rendered index i1), per camera, and its
+    warp check (frames: {(camera, j): linear frame}, each read once and dropped once used)."""
     j0, surf0 = prev
     cfg, K = job.cfg, job.intr.K
     W, H = cfg.render.width, cfg.render.height
@@ -110,11 +113,16 @@ def _write_forward(job, d, prev, i1: int, surf1: dict, depth1: dict, motion, war
         folder = d / "flow" / f"cam{k}"
         write_png(folder / f"{j0:05d}.png", encode_dsec_flow(fwd, valid))
         _save_npz(folder / f"{j0:05d}.npz", forward_px=fwd, valid=valid, occluded=occluded)
+        f0 = frames.pop((k, j0), None)                 # read as the later frame of the step before
         if valid.any():
-            f0 = np.clip(read_exr(job.dir / "frames" / f"cam{k}" / f"{j0:05d}.exr"), 0, 1)
-            f1 = np.clip(read_exr(job.dir / "frames" / f"cam{k}" / f"{j0 + 1:05d}.exr"), 0, 1)
+            f0 = _linear_frame(job, k, j0) if f0 is None else f0
+            f1 = frames[(k, j0 + 1)] = _linear_frame(job, k, j0 + 1)
             warp.append(G.masked_psnr(f0, G.warp_backward(f1, fwd), valid))
             identity.append(G.masked_psnr(f0, f1, valid))
+
+
+def _linear_frame(job, camera: int, j: int) -> np.ndarray:
+    return np.clip(read_exr(job.dir / "frames" / f"cam{camera}" / f"{j:05d}.exr"), 0, 1)
 
 
 def label_events(scene_dir, d, camera: int, frame_times_us: np.ndarray, ids: np.ndarray, objects: dict) -> dict:
@@ -126,24 +134,22 @@ def label_events(scene_dir, d, camera: int, frame_times_us: np.ndarray, ids: np.
         t = ev.times(0, ev.n)
         x, y, _p = ev.rows(0, ev.n)
     labels = G.event_labels(t, x, y, frame_times_us, ids).astype(np.uint8 if len(objects) < 256 else np.uint16)
-    path = d / "event_ids" / f"cam{camera}.npy"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    from common.fileio import atomic_output
-
-    with atomic_output(path) as tmp:
-        with open(tmp, "wb") as f:
-            np.save(f, labels)
+    _save(d / "event_ids" / f"cam{camera}.npy", lambda f: np.save(f, labels))
     counts = np.bincount(labels, minlength=len(objects) + 1)
     return {"none" if i == 0 else objects[str(i)]: int(n) for i, n in enumerate(counts)}
 
 
-def _save_npz(path, **arrays) -> None:
+def _save(path, write) -> None:
+    """write(file) into `path` atomically (common.fileio.atomic_output)."""
     from common.fileio import atomic_output
 
-    path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_output(path) as tmp:
         with open(tmp, "wb") as f:
-            np.savez_compressed(f, **arrays)
+            write(f)
+
+
+def _save_npz(path, **arrays) -> None:
+    _save(path, lambda f: np.savez_compressed(f, **arrays))
 
 
 def share_with_variant(scene_job, variant_job, summary: dict) -> dict:
@@ -151,8 +157,6 @@ def share_with_variant(scene_job, variant_job, summary: dict) -> dict:
     links); its image velocity is the scene's times the speed factor (its time runs that much faster:
     no files of its own, the reader scales the scene's), and its own events are labelled at its own
     times. Returns the variant's manifest entry."""
-    import cv2
-
     from common.fileio import link_tree
 
     src, dst, speed = scene_job.dir / "ground_truth", variant_job.dir / "ground_truth", variant_job.cfg.speed
@@ -165,10 +169,8 @@ def share_with_variant(scene_job, variant_job, summary: dict) -> dict:
     out = {**summary, "rate_fps": round(summary["rate_fps"] * speed, 6), "shared_with": scene_job.dir.name,
            "velocity_scale": speed, "seconds": 0.0}
     out.pop("warp_check", None)                    # measured on the scene's frames, which it shares
-    if "events_by_object" in summary:
+    if "events_by_object" in summary:                # the scene's id maps, kept from writing them
         frame_times = variant_job.t_us[variant_job.kept]
-        out["events_by_object"] = []
-        for k in range(variant_job.cfg.camera.n_cameras):
-            ids = np.stack([cv2.imread(str(f), cv2.IMREAD_UNCHANGED) for f in sorted((src / "ids" / f"cam{k}").glob("*.png"))])
-            out["events_by_object"].append(label_events(variant_job.dir, dst, k, frame_times, ids, summary["objects"]))
+        out["events_by_object"] = [label_events(variant_job.dir, dst, k, frame_times, ids, summary["objects"])
+                                   for k, ids in scene_job.ground_truth_ids.items()]
     return out
