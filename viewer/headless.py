@@ -77,4 +77,11 @@ class HeadlessChromium:
                 except subprocess.TimeoutExpired:
                     os.killpg(self.proc.pid, signal.SIGKILL)
                     self.proc.wait()
+            # Chromium keeps its singleton socket in a folder of its own under TMPDIR
+            # (org.chromium.Chromium.*), linked from the profile, and leaves it behind when it exits.
+            socket = self.profile / "SingletonSocket"
+            if socket.is_symlink():
+                folder = Path(os.readlink(socket)).parent
+                if folder.name.startswith("org.chromium."):
+                    shutil.rmtree(folder, ignore_errors=True)
             shutil.rmtree(self.profile, ignore_errors=True)

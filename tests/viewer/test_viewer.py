@@ -4,9 +4,11 @@ to it shows the model (the image the server sends for a dataset camera and time 
 nor a run are refused in one line; starting, serving and stopping leave no process and no file."""
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -32,6 +34,28 @@ def _need_chromium():
 
 
 # -- arithmetic -------------------------------------------------------------------------------------
+def test_a_closed_browser_leaves_nothing_in_the_temporary_folder(monkeypatch):
+    """Chromium makes a folder of its own for its singleton socket under TMPDIR and leaves it behind
+    (hundreds of org.chromium.Chromium.* folders in /tmp after some test runs)."""
+    _need_chromium()
+    from viewer.headless import HeadlessChromium
+
+    # A short folder: a Unix socket's path must stay under 108 bytes, and pytest's tmp_path is long.
+    outer = Path(tempfile.mkdtemp(prefix="e4t"))
+    try:
+        monkeypatch.setenv("TMPDIR", str(outer))
+        monkeypatch.setattr("tempfile.tempdir", None)
+        browser = HeadlessChromium(300, 200)
+        try:
+            browser.open("data:text/html,<p>page</p>")
+            _wait(lambda: browser.evaluate("document.readyState") == "complete", 30.0, "the page did not load")
+        finally:
+            browser.close()
+        assert sorted(p.name for p in outer.iterdir()) == []
+    finally:
+        shutil.rmtree(outer, ignore_errors=True)
+
+
 def test_quaternions_and_matrices_round_trip(rng):
     for _ in range(50):
         q = rng.normal(size=4)
