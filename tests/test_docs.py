@@ -76,3 +76,21 @@ def test_a_planted_contradiction_is_caught(planted, words):
     assert cfg["speed_levels"]["mild"] == 26.2 and iterations(cfg, "hinge", "e2vid_d3dgs") == 670
     found = contradictions(planted, cfg)
     assert len(found) == 1 and words in found[0], found
+
+
+def missing_config_paths(text: str) -> list[str]:
+    """`configs/....yaml` paths a page names that the repository does not have."""
+    return sorted({p for p in re.findall(r"configs/[\w./-]+?\.yaml", text) if not (ROOT / p).is_file()})
+
+
+@pytest.mark.parametrize("page", [ROOT / "README.md"] + sorted(
+    p for p in (ROOT / "docs").rglob("*.md")), ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_config_file_a_page_names_exists(page):
+    """Results pages included: a user follows their paths too (old names work until 0.3, but the
+    pages name the shipped files)."""
+    assert missing_config_paths(page.read_text()) == []
+
+
+def test_a_renamed_config_path_is_caught():
+    assert missing_config_paths("see configs/recon/bench/d3dgs_quick.yaml and configs/datasets/quick.yaml") == [
+        "configs/recon/bench/d3dgs_quick.yaml"]
