@@ -125,15 +125,20 @@ def _linear_frame(job, camera: int, j: int) -> np.ndarray:
     return np.clip(read_exr(job.dir / "frames" / f"cam{camera}" / f"{j:05d}.exr"), 0, 1)
 
 
+LABEL_CHUNK = 1 << 22                               # events labelled per read (4 M)
+
+
 def label_events(scene_dir, d, camera: int, frame_times_us: np.ndarray, ids: np.ndarray, objects: dict) -> dict:
     """Write ground_truth/event_ids/cam<k>.npy (each event's object id, datagen.ground_truth.event_labels)
     and return the camera's event count per object name ("none": pixels that see no surface)."""
     from eventio.event_file import EventFile
 
     with EventFile(scene_dir / "events" / f"cam{camera}.h5") as ev:
-        t = ev.times(0, ev.n)
-        x, y, _p = ev.rows(0, ev.n)
-    labels = G.event_labels(t, x, y, frame_times_us, ids).astype(np.uint8 if len(objects) < 256 else np.uint16)
+        labels = np.empty(ev.n, np.uint8 if len(objects) < 256 else np.uint16)
+        for i0 in range(0, ev.n, LABEL_CHUNK):          # memory bounded by the chunk, not the clip
+            i1 = min(i0 + LABEL_CHUNK, ev.n)
+            x, y, _p = ev.rows(i0, i1)
+            labels[i0:i1] = G.event_labels(ev.times(i0, i1), x, y, frame_times_us, ids)
     _save(d / "event_ids" / f"cam{camera}.npy", lambda f: np.save(f, labels))
     counts = np.bincount(labels, minlength=len(objects) + 1)
     return {"none" if i == 0 else objects[str(i)]: int(n) for i, n in enumerate(counts)}

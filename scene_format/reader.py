@@ -69,6 +69,7 @@ class GroundTruth:
     absent). Conventions: the manifest's `ground_truth.conventions`, docs/reference/dataset_layout.md."""
     camera: int
     index: int
+    t_us: int                                  # the kept frame's time (cameras.json's clock); pose(camera, t_us)
     depth_m: np.ndarray | None = None          # float32 [H, W] z-depth, metres; 0 = no surface
     normals: np.ndarray | None = None          # float32 [H, W, 3] unit, camera frame (OpenCV); 0 = no surface
     ids: np.ndarray | None = None              # uint16 [H, W] 1 + part index (objects()); 0 = no surface
@@ -167,6 +168,12 @@ class SceneDataset:
         return self.dir / "events" / f"cam{camera}.h5"
 
     @property
+    def kept_times_us(self) -> np.ndarray:
+        """int64 [J]: the time of each kept frame (rgb/, frames/, the test views and the ground truth's
+        frame index j), every `frames.keep_every`-th rendered timestamp."""
+        return self.cameras[0].times_us[::self.config.frames.keep_every].astype(np.int64)
+
+    @property
     def ground_truth_kinds(self) -> tuple[str, ...]:
         """Which per-pixel ground truth the scene holds (depth, flow, normals, ids); () for none."""
         return tuple((self.manifest.get("ground_truth") or {}).get("kinds", ()))
@@ -206,7 +213,7 @@ class SceneDataset:
             if velocity.exists():         # a speed variant's is its scene's, faster by its speed factor
                 with np.load(velocity) as z:
                     out["velocity_px_per_ms"] = (z["px_per_ms"] * float(gt.get("velocity_scale", 1.0))).astype(np.float32)
-        return GroundTruth(camera, index, **out)
+        return GroundTruth(camera, index, int(self.kept_times_us[index]), **out)
 
     def pose(self, camera: int, t_us) -> np.ndarray:
         """OpenCV camera-to-world [4, 4] of a camera at any time inside the clip."""

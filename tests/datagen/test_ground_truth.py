@@ -249,6 +249,29 @@ def test_every_event_is_labelled_and_the_counts_add_up(gt_scene):
         assert counts["none"] < 0.5 * len(labels)                  # most events come from the moving cubes
 
 
+def test_events_are_labelled_in_bounded_chunks_with_the_labels_of_one_pass(gt_scene, tmp_path, monkeypatch):
+    """A paper scene's camera has tens of millions of events: labelling reads them a chunk at a time
+    (memory bounded by the chunk, not the clip), and the labels are those of one pass over them all."""
+    from datagen import ground_truth_files as F
+    from eventio.event_file import EventFile
+    from scene_format.reader import SceneDataset
+
+    scene = SceneDataset(gt_scene)
+    ids = np.stack([scene.ground_truth(0, j).ids for j in range(len(scene.kept_times_us))])
+    objects = scene.manifest["ground_truth"]["objects"]
+    with EventFile(gt_scene / "events" / "cam0.h5") as ev:
+        n = ev.n
+        whole = G.event_labels(ev.times(0, n), *ev.rows(0, n)[:2], scene.kept_times_us, ids)
+    reads = []
+    rows = EventFile.rows
+    monkeypatch.setattr(EventFile, "rows", lambda self, i0, i1: reads.append(i1 - i0) or rows(self, i0, i1))
+    monkeypatch.setattr(F, "LABEL_CHUNK", 1000)
+    counts = F.label_events(gt_scene, tmp_path, 0, scene.kept_times_us, ids, objects)
+    assert max(reads) <= 1000 and sum(reads) == n and len(reads) > 1
+    assert np.array_equal(np.load(tmp_path / "event_ids" / "cam0.npy"), whole)
+    assert counts == scene.manifest["ground_truth"]["events_by_object"][0]
+
+
 def test_a_speed_variant_shares_the_maps_and_its_velocity_is_the_scenes_times_its_speed(gt_scene):
     from scene_format.reader import SceneDataset
 
@@ -256,6 +279,8 @@ def test_a_speed_variant_shares_the_maps_and_its_velocity_is_the_scenes_times_it
     assert not (variant.dir / "ground_truth" / "velocity").exists()            # no copies of its own
     for j in (0, 3):
         a, b = scene.ground_truth(0, j), variant.ground_truth(0, j)
+        assert a.t_us == scene.kept_times_us[j] == j * 1e6 * scene.config.frames.keep_every / scene.config.render.fps
+        assert b.t_us == pytest.approx(a.t_us / 4, abs=1)         # the same frame, 4 times sooner
         for field in ("depth_m", "normals", "ids", "flow_px", "flow_valid"):
             assert np.array_equal(getattr(a, field), getattr(b, field)), field
         assert np.allclose(b.velocity_px_per_ms, 4 * a.velocity_px_per_ms)
