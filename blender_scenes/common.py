@@ -6,6 +6,7 @@ packed into the .blend; nothing is loaded from disk.
 """
 from __future__ import annotations
 
+import json
 import math
 
 import bpy
@@ -171,6 +172,9 @@ def _is_animated(obj) -> bool:
     return bool(obj.animation_data and obj.animation_data.action)
 
 
+JOINED_PARTS = "e4dgs_joined_parts"     # custom property: JSON list of the parts an object was joined from
+
+
 def consolidate() -> int:
     """Join the non-animated mesh parts that share a parent into one object per parent.
 
@@ -187,6 +191,9 @@ def consolidate() -> int:
         if len(parts) < 2:
             continue
         target = parts[0]
+        # The joined object keeps its first part's name; what it holds is recorded for the ground
+        # truth's object table (a room's "floor" is its whole static shell and fixtures).
+        target[JOINED_PARTS] = json.dumps([p.name for p in parts])
         with bpy.context.temp_override(active_object=target, object=target,
                                        selected_objects=parts, selected_editable_objects=parts):
             bpy.ops.object.join()

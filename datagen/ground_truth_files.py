@@ -1,7 +1,8 @@
 """Write a scene's per-pixel ground truth (datagen.ground_truth) beside its frames, after the render
 loop, for every kept frame of every camera:
 
-    ground_truth/objects.json              {"1": part name, ...}; id 0 = no surface; units and conventions
+    ground_truth/objects.json              {"1": part name, ...}; id 0 = no surface; the parts each joined
+                                           object holds; units and conventions
     ground_truth/depth/cam<k>/<j>.exr      float32 z-depth, metres, camera frame; 0 = no surface
     ground_truth/normals/cam<k>/<j>.exr    float32 R,G,B = unit normal (x, y, z) in the camera frame; 0 = none
     ground_truth/ids/cam<k>/<j>.png        uint16 object id
@@ -30,7 +31,8 @@ CONVENTIONS = {
     "pixels": "pixel (x, y) is the ray through (x + 0.5, y + 0.5); OpenCV camera axes (x right, y down, z forward)",
     "depth": "z-depth in metres along the camera's z axis (not the ray length); 0 where no surface is seen",
     "normals": "unit face normals in the camera frame, turned to face the camera; 0 where no surface is seen",
-    "ids": "1 + the index of the scene part seen (objects.json names them); 0 where no surface is seen",
+    "ids": "1 + the index of the scene part seen (objects.json names them); 0 where no surface is seen; static parts "
+           "that share a parent are one object, named after its first part (objects.json's joined lists them)",
     "flow": "forward: where the surface point seen at a pixel of kept frame j is at kept frame j + 1, minus the "
             "pixel (camera and object motion); valid where it is in front of the camera, inside the image and not "
             "occluded (the later depth map nearer by more than 2 %); DSEC-Flow PNG: channels (x, y, valid), "
@@ -52,7 +54,9 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     T = len(job.tau)
     tracer = SurfaceTracer(job.tau)
     objects = {str(n + 1): name for n, name in enumerate(tracer.names)}
-    write_text_atomic(d / "objects.json", json.dumps({"objects": objects, "conventions": CONVENTIONS}, indent=1))
+    joined = {str(n + 1): parts for n, parts in sorted(tracer.joined.items())}
+    write_text_atomic(d / "objects.json", json.dumps({"objects": objects, "joined": joined, "conventions": CONVENTIONS},
+                                                     indent=1))
     flow = "flow" in kinds
     warp, identity = [], []
     ids_by_camera = {k: [] for k in range(C)}          # the event labels' look-up (with ids)
@@ -86,7 +90,7 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
         events_by_object = [label_events(job.dir, d, k, frame_times, job.ground_truth_ids[k], objects) for k in range(C)]
     seconds = time.perf_counter() - t0
     out = {"kinds": list(kinds), "frames": "every kept frame of every camera",
-           "rate_fps": round(cfg.real_fps / cfg.frames.keep_every, 6), "objects": objects,
+           "rate_fps": round(cfg.real_fps / cfg.frames.keep_every, 6), "objects": objects, "joined": joined,
            "conventions": {k: CONVENTIONS[k] for k in ("pixels", *kinds, *(("velocity",) if flow else ()))},
            "seconds": round(seconds, 3)}
     if events_by_object is not None:

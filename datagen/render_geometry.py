@@ -6,11 +6,14 @@ The pure part of the measurement (paths, windows, statistics) is `datagen.blur_g
 """
 from __future__ import annotations
 
+import json
+
 import bpy
 import mathutils
 import numpy as np
 from mathutils.bvhtree import BVHTree
 
+from blender_scenes.common import JOINED_PARTS
 from datagen import render as R
 from datagen.blur_geometry import PartMotion
 from common.config import ConfigError
@@ -254,6 +257,8 @@ class SurfaceTracer:
         self.sampler.find_deforming(deform_check_taus(tau))
         self.motion = self.sampler.motion(tau)
         self.names = [o.name for o in self.sampler.objects]
+        # part index -> the scene's parts it was joined from (blender_scenes.common.consolidate)
+        self.joined = {n: json.loads(o[JOINED_PARTS]) for n, o in enumerate(self.sampler.objects) if JOINED_PARTS in o}
 
     def views_at(self, i: int, c2w: dict[int, np.ndarray], K: np.ndarray, width: int, height: int) -> dict:
         """{camera k: ViewSurface} at rendered-time index i for the cameras' OpenCV poses c2w {k: [4, 4]}."""

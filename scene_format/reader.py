@@ -183,6 +183,13 @@ class SceneDataset:
         gt = self.manifest.get("ground_truth") or {}
         return {int(k): v for k, v in gt.get("objects", {}).items()}
 
+    def joined_parts(self) -> dict[int, list[str]]:
+        """{object id: the scene parts it holds} for objects the renderer joined (static parts that
+        share a parent are one object, named after its first part: a room's "floor" is its whole
+        static shell and fixtures)."""
+        gt = self.manifest.get("ground_truth") or {}
+        return {int(k): list(v) for k, v in gt.get("joined", {}).items()}
+
     def ground_truth(self, camera: int, index: int) -> GroundTruth:
         """Kept frame `index` of `camera`'s ground truth as typed arrays (DatasetError when the scene
         has none, or the frame is not one of its kept frames)."""
