@@ -296,7 +296,7 @@ def test_a_speed_variant_shares_the_maps_and_its_velocity_is_the_scenes_times_it
 
 
 JOINED = """
-import json, sys
+import json
 from pathlib import Path
 import numpy as np
 import bpy
