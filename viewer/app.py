@@ -179,8 +179,6 @@ class Viewer:
     # -- tabs ------------------------------------------------------------------------------------
     def _connect(self, client) -> None:
         st = TabState()
-        with self._lock:
-            self._tabs[client.client_id] = st
         gui = client.gui
         n = len(self.trajectories)
         dur_ms = self.duration_us / 1000.0
@@ -227,6 +225,8 @@ class Viewer:
         h["slowmo"].on_update(on_slowmo)
         h["snap"].on_click(lambda _: self.snap(client.client_id, st.camera))
         client.camera.on_update(lambda cam: self._camera_moved(client.client_id))
+        with self._lock:      # served from now on: the render loop finds every handle of the tab there
+            self._tabs[client.client_id] = st
 
     def _disconnect(self, client) -> None:
         with self._lock:

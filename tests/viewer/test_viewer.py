@@ -170,6 +170,27 @@ def test_a_tab_gets_its_panels_before_its_browser_reports_a_camera(motion_scene)
         viewer.stop()
 
 
+def test_a_tab_is_served_only_once_its_controls_exist(motion_scene):
+    """The render loop serves every registered tab: registered before its controls were built (a
+    connect slowed by a busy machine), a tab was served without its status line (KeyError 'status'),
+    and its panels, marked done, never came."""
+    from unittest.mock import MagicMock
+
+    from viewer.app import Viewer
+    from viewer.sources import open_source
+
+    viewer = Viewer([open_source(motion_scene)], port=0)
+    try:
+        seen = []
+        client = MagicMock(client_id=7)
+        client.gui.add_markdown.side_effect = lambda *a, **k: seen.append(7 in viewer.tab_ids()) or MagicMock()
+        viewer._connect(client)
+        assert seen and not any(seen)                    # not served while its controls were being added
+        assert 7 in viewer.tab_ids()                      # and served once they are
+    finally:
+        viewer.stop()
+
+
 def test_a_headless_browser_sees_the_model_render_at_a_dataset_camera_and_time(trained, motion_scene, tmp_path):
     _need_chromium()
     from recon.model import load
