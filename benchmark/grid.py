@@ -87,23 +87,21 @@ class Job:
     def identity_parts(self) -> dict[str, str]:
         """What makes its result, each as a digest: `config` (the method and its resolved config, every
         field), `inputs` (files the method reads besides config and scene: E2VID's weights), `dataset`
-        (the scene folder's content, scene_format.manifest.content_digest, with its name) and `code`
-        (common.provenance.code_version, plus a plug-in method's own source file). A row whose parts
-        differ from its job's was made by something else."""
+        (the scene folder's content as it is on disk, scene_format.manifest.folder_digest, with its
+        name), `code` (common.provenance.code_version of the job's driver and the method's module:
+        every checkout module they import, normalised; a plug-in method outside the checkout adds its
+        own file) and `placement` (the config's `auto` choices as this machine resolves them: device,
+        backend, deformation precision). A row whose parts differ from its job's was made by
+        something else."""
         from common.config import dump_config
-        from common.provenance import code_version
-        from recon.methods import get_method
         from scene_format.manifest import folder_digest
 
-        code = code_version()
-        source = _source_file(get_method(self.method))
-        if source is not None and not source.is_relative_to(REPO):      # a plug-in's code is its own file
-            code = _sha({"toolkit": code, "plugin": hashlib.sha256(source.read_bytes()).hexdigest()})
         return {"config": _sha({"method": self.method, "config": dump_config(self.method_config)}),
                 "inputs": _sha(self._input_digests()),
                 "dataset": _sha({"scene": self.data_scene, "dataset": self.dataset,
                                  "content": folder_digest(self.data_dir)}),
-                "code": code}
+                "code": method_code_version(self.method),
+                "placement": _sha(resolved_placement(self.method_config))}
 
     def config_hash(self) -> str:
         """The digest of everything that makes its result (identity_parts), computed once per job: the
@@ -113,6 +111,44 @@ class Job:
     @functools.cached_property
     def _config_hash(self) -> str:
         return _sha(self.identity_parts)
+
+
+@functools.lru_cache(maxsize=None)
+def method_code_version(method: str) -> str:
+    """The code version of a job of `method` (computed once per process): the import closure of the
+    job's driver and the module that defines the method; a plug-in defined outside the checkout adds
+    the normalised digest of its own source file."""
+    from common.provenance import JOB_ENTRY, code_version, normalised_digest
+    from recon.methods import get_method
+
+    cls = get_method(method)
+    source = _source_file(cls)
+    if source is not None and not source.is_relative_to(REPO):      # a plug-in's code is its own file
+        return _sha({"toolkit": code_version(REPO, (JOB_ENTRY,)), "plugin": normalised_digest(source)})
+    return code_version(REPO, (JOB_ENTRY, cls.__module__))
+
+
+def resolved_placement(method_cfg) -> dict[str, str]:
+    """{device, backend, precision} that a run of `method_cfg` resolves to on this machine (its `auto`
+    choices: recon.device.run_placement, recon.precision.resolve_precision, measured once per machine
+    and cached); a plug-in without the shared TrainConfig: {}. A DeviceError is a ConfigError."""
+    t = getattr(method_cfg, "train", None)
+    if t is None:
+        return {}
+    return _placement(t.device, t.backend, t.precision, t.deform_field.kind)
+
+
+@functools.lru_cache(maxsize=None)
+def _placement(device: str, backend: str, precision: str, field_kind: str) -> dict[str, str]:
+    from recon.device import DeviceError, run_placement
+    from recon.precision import resolve_precision
+
+    try:
+        dev, back = run_placement(device, backend)
+    except DeviceError as exc:
+        raise ConfigError(str(exc)) from None
+    return {"device": dev.type, "backend": back,          # as recon.trainer.Trainer resolves them
+            "precision": resolve_precision(precision, dev, field_kind=field_kind).dtype}
 
 
 @functools.lru_cache(maxsize=4096)
@@ -262,16 +298,36 @@ def current_rows(cfg: BenchConfig, rows: list[dict], data_root: Path | None = No
     kept, stale = [], []
     for r in rows:
         job = by_key.get(r.get("key"))
-        note = None if r.get("external") or job is None else older_note(r, job)
+        note = None if r.get("external") or job is None else older_note(r, job) or scoring_note(r, job, cfg)
         if r.get("external") or (job is not None and note is None):
             kept.append(r)
-        elif note and reuse_older and note != "config":
+        elif note and reuse_older and note != "config" and not scoring_note(r, job, cfg):
             kept.append({**r, "older": note})
         else:
             stale.append(r)
     order = {s: i for i, s in enumerate(cfg.scenes)}
     kept.sort(key=lambda r: order.get(r.get("scene"), len(order)))
     return kept, stale
+
+
+def wants_lpips(job: Job, cfg: BenchConfig) -> bool:
+    """Whether a job's row needs LPIPS: the speed study reads PSNR only, so its own runs skip LPIPS-VGG
+    (~30 s of a task) unless speed.lpips; a row without it is not reused for a job that needs it."""
+    return not (job.study == "speed" and not cfg.speed.lpips)
+
+
+def scoring_note(row: dict, job: Job, cfg: BenchConfig) -> str | None:
+    """None when `row` was scored as `job` is scored now; else what differs: the LPIPS network (the
+    preset's `lpips_net`, for a job that wants LPIPS) or the scene's dynamic masks (`e4dgs masks`
+    again, another threshold). Scoring is not training: such a row is scored again from its trained
+    model, never shown beside rows scored the other way."""
+    from scene_format.manifest import masks_digest
+
+    if wants_lpips(job, cfg) and row.get("lpips_net") != cfg.lpips_net:
+        return f"LPIPS {row.get('lpips_net') or 'none'}, not {cfg.lpips_net}"
+    if row.get("masks", "none") != masks_digest(job.data_dir):
+        return "scored with other dynamic masks"
+    return None
 
 
 def older_note(row: dict, job: Job) -> str | None:
@@ -288,9 +344,9 @@ def older_note(row: dict, job: Job) -> str | None:
         return "config"
     then = row.get("identity")
     git = f" (git {row['git_commit'][:7]})" if row.get("git_commit") else ""
-    if not isinstance(then, dict):
-        return f"unknown version{git}"
-    if then.get("config") != now["config"] or then.get("inputs") != now["inputs"]:
+    if not isinstance(then, dict):        # made before identities were recorded: its recipe is unknown
+        return "config"
+    if any(then.get(k) != now[k] for k in ("config", "inputs", "placement")):
         return "config"
     parts = [f"code {then.get('code', '?')[:8]}" if then.get("code") != now["code"] else "",
              f"dataset {then.get('dataset', '?')[:8]}" if then.get("dataset") != now["dataset"] else ""]

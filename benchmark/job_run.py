@@ -10,11 +10,12 @@ from pathlib import Path
 from typing import Callable, Protocol
 
 from benchmark.config import BenchConfig
-from benchmark.grid import Job
+from benchmark.grid import Job, scoring_note, wants_lpips  # noqa: F401 - wants_lpips: for callers
 from benchmark.rows import ResultRow
 from common import provenance
 from common.machine import cpu_summary
 from common.provenance import git_commit
+from scene_format.manifest import masks_digest
 from scene_format.reader import SceneDataset
 
 
@@ -50,7 +51,7 @@ def complete_row(row: dict, job: Job, cfg: BenchConfig, data_root: Path) -> bool
     dynamic-region scores once its scene has masks (a row scored before is scored again, from the
     trained model: nothing is trained twice)."""
     return (row.get("status") != "failed" and (row.get("lpips") is not None or not wants_lpips(job, cfg))
-            and ("psnr_dyn" in row or not has_masks(job, data_root)))
+            and ("psnr_dyn" in row or not has_masks(job, data_root)) and scoring_note(row, job, cfg) is None)
 
 
 def data_stats(dataset: SceneDataset) -> dict:
@@ -70,12 +71,6 @@ def scores_snapshots(job: Job) -> bool:
     """Whether a job's earlier snapshots are scored again on every test view: the main study's (the
     accuracy-vs-time curves); the studies' curves stay in their log.jsonl (~25 s of a task saved)."""
     return job.study == "main"
-
-
-def wants_lpips(job: Job, cfg: BenchConfig) -> bool:
-    """Whether a job's row needs LPIPS: the speed study reads PSNR only, so its own runs skip LPIPS-VGG
-    (~30 s of a task) unless speed.lpips; a row without it is not reused for a job that needs it."""
-    return not (job.study == "speed" and not cfg.speed.lpips)
 
 
 def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progress: bool, method_cfg=None) -> dict:
@@ -112,7 +107,8 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         cpu=cpu_summary(), wall_s=result.train_s, train_elapsed_s=round(result.elapsed_s, 1),
         eval_s=round(time.time() - t1, 1), snapshots=snapshots, versions=versions(), git_commit=git_commit(),
         lpips_net=lpips_net, recipe=recipe_of(method_cfg), gpu=gpu_name(result.device),
-        views_sha256=final["views_sha256"], views_dir=f"{job.folder}/{VIEWS_DIR}").to_dict()
+        views_sha256=final["views_sha256"], views_dir=f"{job.folder}/{VIEWS_DIR}",
+        masks=masks_digest(job_data_dir(job, data_root))).to_dict()
 
 
 VIEWS_DIR = "views"         # a training folder's scored test views (recon.view_record), the row's audit

@@ -149,6 +149,50 @@ def sha256_file(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
+_DIGESTS: dict[tuple, str] = {}
+DIGEST_CACHE_FILE = "file-sha256.json"
+
+
+def sha256_files_cached(paths: list[str | os.PathLike], cache: Path | None = None) -> list[str]:
+    """sha256_file of each file as it is on disk now, remembered by (absolute path, size, mtime, inode):
+    a file rewritten, replaced or copied over gets another key and is read again. The digests are kept
+    in memory and in `cache` (a JSON file; default common.machine.cache_dir() / file-sha256.json, read
+    and written once per call), so a scene folder is read once per machine, not once per benchmark; a
+    cache that cannot be read or written is skipped. OSError for a file that is not there."""
+    import json
+
+    from common.machine import cache_dir
+
+    keys = []
+    for path in paths:
+        p = Path(path).resolve()
+        st = p.stat()
+        keys.append((str(p), st.st_size, st.st_mtime_ns, st.st_ino))
+    todo = [k for k in keys if k not in _DIGESTS]
+    if todo:
+        cache = Path(cache) if cache is not None else cache_dir() / DIGEST_CACHE_FILE
+        try:
+            stored = json.loads(cache.read_text())
+            stored = stored if isinstance(stored, dict) else {}
+        except (OSError, ValueError):
+            stored = {}
+        fresh = 0
+        for key in todo:
+            name = "|".join(map(str, key))
+            digest = stored.get(name)
+            if not (isinstance(digest, str) and re.fullmatch(r"[0-9a-f]{64}", digest)):
+                digest = stored[name] = sha256_file(key[0])
+                fresh += 1
+            _DIGESTS[key] = digest
+        if fresh:
+            try:
+                cache.parent.mkdir(parents=True, exist_ok=True)
+                write_text_atomic(cache, json.dumps(stored))
+            except OSError:
+                pass
+    return [_DIGESTS[k] for k in keys]
+
+
 def link_tree(src: str | os.PathLike, dst: str | os.PathLike, pattern: str = "*") -> None:
     """Every file under src (matching `pattern`) at the same place under dst: a hard link, or a copy
     where the file system refuses links (another device). An existing file at dst is replaced."""

@@ -84,14 +84,47 @@ def content_digest(manifest: dict[str, Any]) -> str:
 
 
 def folder_digest(scene_dir: Path) -> str:
-    """content_digest of a scene folder's manifest.json; "absent" where the folder has none yet (not
-    generated), "unreadable" where it is not a JSON manifest."""
+    """content_digest of a scene folder as it is on disk: the manifest's facts with every listed file's
+    digest taken from the file itself (common.fileio.sha256_files_cached), not from the manifest, so a
+    file copied over another (events from elsewhere, say) makes the folder another dataset even when
+    the manifest was left as it was. "absent" where the folder has no manifest yet (not generated),
+    "unreadable" where it is not a JSON manifest, "missing <file>" where a listed file is not there."""
     import json
 
-    path = Path(scene_dir) / "manifest.json"
+    from common.fileio import sha256_files_cached
+
+    scene_dir = Path(scene_dir)
+    path = scene_dir / "manifest.json"
     try:
-        return content_digest(json.loads(path.read_bytes()))
+        manifest = json.loads(path.read_bytes())
+        files = manifest.get("files") or {}
+        if not isinstance(files, dict):
+            return "unreadable"
     except FileNotFoundError:
         return "absent"
     except (ValueError, AttributeError):
         return "unreadable"
+    names = sorted(n for n in files if not n.startswith(NOT_TRAINED_ON))
+    missing = next((n for n in names if not (scene_dir / n).is_file()), None)
+    if missing is not None:
+        return f"missing {missing}"
+    on_disk = dict(zip(names, sha256_files_cached([scene_dir / n for n in names])))
+    return content_digest({**manifest, "files": on_disk})
+
+
+def masks_digest(scene_dir: Path) -> str:
+    """SHA-256 of a scene folder's dynamic-region masks as they are on disk (dynamic/: the masks and
+    masks.json, whose threshold says how they were made); "none" where the folder has none. The
+    scores over moving pixels are computed with them, so a row holds the digest it was scored with."""
+    import hashlib
+
+    from common.fileio import sha256_files_cached
+
+    folder = Path(scene_dir) / NOT_TRAINED_ON[0]
+    files = sorted(p for p in folder.rglob("*") if p.is_file()) if folder.is_dir() else []
+    if not files:
+        return "none"
+    h = hashlib.sha256()
+    for p, digest in zip(files, sha256_files_cached(files)):
+        h.update(p.relative_to(folder).as_posix().encode() + b"\0" + digest.encode() + b"\0")
+    return h.hexdigest()[:16]

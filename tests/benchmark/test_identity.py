@@ -2,7 +2,6 @@
 its inputs, the scene's content and the code version; a row made by another identity trains again
 (or, with --reuse-older, is kept and marked); every score re-derives from the renders it kept
 (`e4dgs verify`), and an edited render is named."""
-import functools
 import json
 import shutil
 from pathlib import Path
@@ -39,34 +38,125 @@ def benched(motion_scene, tmp_path_factory):
     return out
 
 
+PACKAGES = ("common", "e4dgs", "eventio", "simulator", "scene_format", "datagen", "blender_scenes", "recon",
+            "benchmark", "e2vid", "viewer")
+
+
 def _source_copy(tmp_path: Path) -> Path:
+    """A copy of the checkout's packages (what an installed copy holds), edited by the tests."""
     root = tmp_path / "src"
-    for pkg in provenance.CODE_PACKAGES:
+    for pkg in PACKAGES:
         shutil.copytree(REPO / pkg, root / pkg, ignore=shutil.ignore_patterns("__pycache__"))
-    for m in provenance.CODE_MODULES:
-        (root / m).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy(REPO / m, root / m)
     return root
 
 
-def test_the_code_version_follows_the_code_that_makes_numbers_and_nothing_else(tmp_path):
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert text.count(old) == 1, f"{path}: {old!r} not found once"
+    path.write_text(text.replace(old, new))
+
+
+def _versions(root: Path) -> dict[str, str]:
+    return {m: provenance.code_version(root, (provenance.JOB_ENTRY, f"recon.methods.{m}"))
+            for m in ("d3dgs", "e4dgs", "e2vid_d3dgs")}
+
+
+def test_the_code_version_is_the_normalised_import_closure_of_what_a_job_runs(tmp_path):
     root = _source_copy(tmp_path)
-    before = provenance.code_version(root)
-    assert before == provenance.code_version(REPO)                # an installed copy: same code, same version
-    (root / "README.md").write_text("docs change")                # not code
+    before = _versions(root)
+    assert before == _versions(REPO)                   # an installed copy: same code, same version
+    closure = provenance.import_closure((provenance.JOB_ENTRY, "recon.methods.e4dgs"))
+    assert {"eventio.event_file", "recon.event_windows", "recon.trainer", "common.metrics.image"} <= set(closure)
+    assert not [m for m in closure if m.endswith(("cli", "__main__")) or m.startswith(("e4dgs", "viewer", "datagen"))]
+
+    # comments, docstrings and formatting: the same statements, the same version
+    _edit(root / "recon" / "trainer.py", "\nclass Trainer", "\n# a comment a reviewer added\nclass Trainer")
+    _edit(root / "eventio" / "event_file.py", '"""The typed boundary', '"""An edited docstring. The typed boundary')
+    (root / "README.md").write_text("docs change")
     (root / "recon" / "__pycache__").mkdir(exist_ok=True)
-    assert provenance.code_version.__wrapped__(root) == before
     config = root / "recon" / "config.py"
-    text = config.read_text()
-    assert "    grad_threshold: float = 2e-4" in text
-    config.write_text(text.replace("    grad_threshold: float = 2e-4", "    grad_threshold: float = 3e-4"))
-    assert provenance.code_version.__wrapped__(root) != before    # one default changed: another version
+    _edit(config, "    grad_threshold: float = 2e-4", "    grad_threshold: float = (\n        2e-4\n    )  # reformatted")
+    assert _versions(root) == before
+    # a command line no job imports: not in any version
+    (root / "e4dgs" / "cli.py").write_text((root / "e4dgs" / "cli.py").read_text() + "\nEXTRA = 1\n")
+    (root / "recon" / "cli.py").write_text((root / "recon" / "cli.py").read_text() + "\nEXTRA = 1\n")
+    assert _versions(root) == before
+
+    # a statement in the event reader (reached through recon/event_windows -> eventio/): another version
+    reader = root / "eventio" / "event_file.py"
+    reader.write_text(reader.read_text() + "\nFLIPPED = -1\n")
+    after = _versions(root)
+    assert all(after[m] != before[m] for m in after)
+    # E2VID's network is imported by its method only
+    reader.write_text(reader.read_text().replace("\nFLIPPED = -1\n", "\n"))
+    assert _versions(root) == before
+    net = root / "e2vid" / "networks.py"
+    net.write_text(net.read_text() + "\nEXTRA = 1\n")
+    after = _versions(root)
+    assert after["e2vid_d3dgs"] != before["e2vid_d3dgs"] and after["d3dgs"] == before["d3dgs"]
+    # one default changed: another version
+    _edit(config, "        2e-4\n", "        3e-4\n")
+    assert _versions(root)["d3dgs"] != before["d3dgs"]
+
+
+BENCH_SCRIPT = """
+import json, sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from benchmark.config import BenchConfig, CellSpec
+from benchmark.runner import run_bench
+from common.config import build_config
+scene, out = Path(sys.argv[2]), Path(sys.argv[3])
+tiny = json.loads(sys.argv[4])
+cfg = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [scene.name], "lpips_net": "alex",
+                                 "cells": {"e4dgs": CellSpec("e4dgs", "E-4DGS (events)", overrides=tiny)}})
+run_bench(cfg, "tiny", scene.parent, out, studies=("main",), progress=False,
+          reuse_older="--reuse-older" in sys.argv)
+"""
+
+
+def _bench_in(root: Path, scene: Path, out: Path, *extra: str) -> str:
+    """`run_bench` in a fresh process that imports the packages of `root` (what runs is the copy)."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-c", BENCH_SCRIPT, str(root), str(scene), str(out), json.dumps(TINY), *extra],
+                       cwd=root, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r.stdout
+
+
+def test_a_comment_keeps_the_row_and_a_statement_in_the_event_reader_trains_again(motion_scene, tmp_path):
+    """The sources edited in a copy that the bench runs from (nothing patched): the row of an events-only
+    job is kept after comments and docstrings, and trained again after one statement of eventio/ changes
+    what it reads (every event's polarity flipped)."""
+    root = _source_copy(tmp_path)
+    out = tmp_path / "runs"
+    said = _bench_in(root, motion_scene, out)
+    assert "1 job(s)" in said and "0 already" in said
+    first = read_results(out / "results.jsonl")[0]
+    _edit(root / "recon" / "trainer.py", "\nclass Trainer", "\n# a comment\nclass Trainer")
+    _edit(root / "eventio" / "event_file.py", '"""The typed boundary', '"""Edited. The typed boundary')
+    said = _bench_in(root, motion_scene, out)
+    assert "1 already" in said and read_results(out / "results.jsonl") == [first]
+
+    reader = root / "eventio" / "event_file.py"
+    reader.write_text(reader.read_text() + "\n_FLIP = True\n")
+    said = _bench_in(root, motion_scene, out)
+    assert "0 already" in said and "made by another version and train again" in said
+    second = read_results(out / "results.jsonl")[0]
+    assert second["code_version"] != first["code_version"] and second["run_dir"] != first["run_dir"]
+    assert second["identity"]["config"] == first["identity"]["config"]
 
 
 def test_an_unchanged_tree_reuses_every_row_and_a_changed_default_trains_again(benched, motion_scene, tmp_path,
                                                                                monkeypatch):
-    """The recon/config.py default edited in a copy of the sources; the bench's identity reads that copy."""
+    """What --reuse-older keeps: a row of the same resolved config made by another code version. The
+    code version is changed by editing the identity of the rows on disk (the edited-source path is the
+    subprocess test above); a recon/config.py default is part of the resolved config, so editing one
+    is never reused (the next test)."""
     from benchmark import job_run
+    from benchmark.rows import write_results
 
     out = tmp_path / "runs"
     shutil.copytree(benched, out)
@@ -77,17 +167,17 @@ def test_an_unchanged_tree_reuses_every_row_and_a_changed_default_trains_again(b
     run_bench(cfg, "tiny", motion_scene.parent, out, studies=("main",), progress=False, log=lambda s: None)
     assert trained == []                                          # unchanged: every row reused
 
-    root = _source_copy(tmp_path)
-    config = root / "recon" / "config.py"
-    config.write_text(config.read_text().replace("    grad_threshold: float = 2e-4", "    grad_threshold: float = 3e-4"))
-    edited = functools.partial(provenance.code_version.__wrapped__, root)
-    monkeypatch.setattr(provenance, "code_version", edited)
-    before = {r["key"]: r for r in read_results(out / "results.jsonl")}
+    rows = read_results(out / "results.jsonl")
+    for r in rows:                                                # as if made by an older checkout
+        r["identity"] = {**r["identity"], "code": "0123456789abcdef"}
+        r["config_hash"], r["code_version"] = "feedfacefeedface", "0123456789abcdef"
+    write_results(out / "results.jsonl", rows)
+    before = {r["key"]: r for r in rows}
     logs = []
     run_bench(cfg, "tiny", motion_scene.parent, out, studies=("main",), progress=False, log=logs.append, reuse_older=True)
     assert trained == [] and any("--reuse-older keeps 2 row(s)" in line for line in logs)
     kept, stale = current_rows(cfg, list(before.values()), motion_scene.parent, reuse_older=True)
-    assert not stale and all(r["older"].startswith(f"code {before[r['key']]['code_version'][:8]}") for r in kept)
+    assert not stale and all(r["older"].startswith("code 01234567") for r in kept)
     write_report(kept, tmp_path / "tables", "", cfg)
     board = (tmp_path / "tables" / "leaderboard.md").read_text()
     assert board.count("†") >= 6 and "Kept from another version with `--reuse-older`" in board
@@ -95,9 +185,20 @@ def test_an_unchanged_tree_reuses_every_row_and_a_changed_default_trains_again(b
 
     run_bench(cfg, "tiny", motion_scene.parent, out, studies=("main",), progress=False, log=logs.append)
     assert sorted(trained) == sorted(before)                      # by default: every affected job trains again
-    after = {r["key"]: r for r in read_results(out / "results.jsonl")}
-    assert all(after[k]["code_version"] == edited()[:16] != before[k]["code_version"] for k in before)
-    assert all(after[k]["run_dir"] != before[k]["run_dir"] for k in before)          # a new training folder
+
+
+def test_a_default_edited_in_the_sources_is_another_recipe_never_reused(motion_scene, tmp_path):
+    """recon/config.py's default is a field of the resolved config: an edit of it (in a copy the bench
+    runs from) trains again even with --reuse-older."""
+    root = _source_copy(tmp_path)
+    out = tmp_path / "runs"
+    _bench_in(root, motion_scene, out)
+    first = read_results(out / "results.jsonl")[0]
+    _edit(root / "recon" / "config.py", "    percent_dense: float = 0.01", "    percent_dense: float = 0.02")
+    said = _bench_in(root, motion_scene, out, "--reuse-older")
+    assert "0 already" in said and "--reuse-older keeps" not in said
+    second = read_results(out / "results.jsonl")[0]
+    assert second["identity"]["config"] != first["identity"]["config"] and second["run_dir"] != first["run_dir"]
 
 
 def test_a_recipe_change_is_never_reused_even_with_reuse_older(benched, motion_scene, tmp_path):
@@ -118,7 +219,8 @@ def test_rows_carry_the_recipe_the_machine_and_the_digest_of_their_scored_views(
     assert e4["recipe"]["iterations"] == 12 and e4["recipe"]["seed"] == 0
     assert e4["recipe"]["deform_field"] in ("mlp", "trajectory") and "coarse_to_fine" in e4["recipe"]
     assert e4["device"] == "cpu" and e4["gpu"] is None and e4["cpu"] and e4["versions"]["torch"]
-    assert set(e4["identity"]) == {"config", "inputs", "dataset", "code"} and e4["code_version"] == e4["identity"]["code"]
+    assert set(e4["identity"]) == {"config", "inputs", "dataset", "code", "placement"}
+    assert e4["code_version"] == e4["identity"]["code"]
     views = json.loads((benched / e4["views_dir"] / "views.json").read_text())
     assert len(views["views"]) == e4["n_test_images"] and views["channels"] == 1          # events only: gray
     assert np.mean([v["psnr"] for v in views["views"]]) == pytest.approx(e4["psnr"], abs=1e-12)
@@ -177,3 +279,73 @@ def test_seeds_train_each_cell_n_times_and_the_tables_show_mean_and_spread(motio
     # a later run of the preset at one seed keeps the seed-1 rows in its tables
     kept, stale = current_rows(_cfg(motion_scene), rows, motion_scene.parent)
     assert len(kept) == 4 and not stale
+
+
+def _scene_copy(motion_scene: Path, tmp_path: Path) -> Path:
+    return Path(shutil.copytree(motion_scene, tmp_path / "data" / motion_scene.name))
+
+
+def _job(cfg: BenchConfig, scene: Path, cell: str = "e4dgs"):
+    return next(j for j in jobs(cfg, scene.parent) if j.cell == cell)
+
+
+def test_event_files_copied_over_without_touching_the_manifest_make_another_dataset(motion_scene, tmp_path):
+    scene = _scene_copy(motion_scene, tmp_path)
+    cfg = _cfg(scene)
+    before = _job(cfg, scene).identity_parts["dataset"]
+    manifest = (scene / "manifest.json").read_bytes()
+    shutil.copy(scene / "events" / "cam1.h5", scene / "events" / "cam0.h5")     # other events, same manifest
+    assert (scene / "manifest.json").read_bytes() == manifest
+    assert _job(cfg, scene).identity_parts["dataset"] != before
+    shutil.copy(motion_scene / "events" / "cam0.h5", scene / "events" / "cam0.h5")
+    assert _job(cfg, scene).identity_parts["dataset"] == before                 # the same bytes again
+    (scene / "events" / "cam0.h5").unlink()
+    assert _job(cfg, scene).identity_parts["dataset"] != before
+
+
+def test_rows_scored_with_other_masks_or_another_lpips_network_are_scored_again_not_shown(benched, motion_scene,
+                                                                                          tmp_path):
+    from benchmark.job_run import complete_row
+
+    scene = _scene_copy(motion_scene, tmp_path)
+    cfg = _cfg(scene)
+    rows = read_results(benched / "results.jsonl")
+    assert all(r["masks"] and r["lpips_net"] == "alex" for r in rows)
+    kept, stale = current_rows(cfg, rows, scene.parent)
+    assert len(kept) == 2 and not stale
+    vgg = build_config(BenchConfig, {**{k: getattr(cfg, k) for k in ("dataset", "scenes", "cells")}, "lpips_net": "vgg"})
+    kept, stale = current_rows(vgg, rows, scene.parent, reuse_older=True)
+    assert kept == [] and len(stale) == 2                         # never an AlexNet value beside a VGG one
+    assert not any(complete_row(r, _job(vgg, scene, r["cell"]), vgg, scene.parent) for r in rows)
+    # the masks made again with another threshold: the dynamic-region scores are stale
+    masks = scene / "dynamic" / "masks.json"
+    masks.parent.mkdir(exist_ok=True)
+    masks.write_text(json.dumps({"threshold_px": 0.123}) if not masks.exists()
+                     else masks.read_text().replace("}", ', "edited": 1}', 1))
+    kept, stale = current_rows(cfg, rows, scene.parent, reuse_older=True)
+    assert kept == [] and len(stale) == 2
+    assert not any(complete_row(r, _job(cfg, scene, r["cell"]), cfg, scene.parent) for r in rows)
+
+
+def test_the_resolved_placement_is_part_of_the_identity(motion_scene):
+    from benchmark.grid import resolved_placement
+
+    cfg = _cfg(motion_scene)
+    job = _job(cfg, motion_scene)
+    auto = resolved_placement(job.method_config)
+    assert auto["device"] == "cpu" and auto["backend"] == "cpu" and auto["precision"] in ("float32", "bfloat16")
+    parts = {}
+    for precision in ("float32", "bfloat16", "auto"):
+        c = build_config(BenchConfig, {"dataset": "tiny_motion", "scenes": [motion_scene.name], "lpips_net": "alex",
+                                       "cells": {"e4dgs": CellSpec("e4dgs", overrides={**TINY, "train.precision": precision})}})
+        parts[precision] = _job(c, motion_scene).identity_parts["placement"]
+    assert parts["float32"] != parts["bfloat16"] and parts["auto"] == parts[auto["precision"]]
+
+
+def test_reuse_older_never_keeps_a_row_of_another_placement_or_without_an_identity(benched, motion_scene):
+    cfg = _cfg(motion_scene)
+    rows = read_results(benched / "results.jsonl")
+    other = [{**r, "config_hash": "0" * 16, "identity": {**r["identity"], "placement": "elsewhere"}} for r in rows]
+    assert current_rows(cfg, other, motion_scene.parent, reuse_older=True)[0] == []
+    bare = [{k: v for k, v in r.items() if k != "identity"} | {"config_hash": "0" * 16} for r in rows]
+    assert current_rows(cfg, bare, motion_scene.parent, reuse_older=True)[0] == []
