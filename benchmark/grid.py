@@ -334,8 +334,8 @@ def older_note(row: dict, job: Job) -> str | None:
     """None when `row` was made by `job` as it is now; else what made it differ: "config" (another
     resolved config or input file: never reused), or a note for the tables naming the code version and
     dataset it came from ("code 1a2b3c4d, dataset ..."; the row's git_commit says which checkout, and
-    one code version spans many commits) or "unknown version (git 5e6f7a8)" for a row from before
-    identities were recorded."""
+    one code version spans many commits). A row from before identities were recorded, or of another
+    resolved placement (device, backend, precision), is "config": never reused."""
     try:
         if row.get("config_hash") == job.config_hash():
             return None
@@ -343,7 +343,6 @@ def older_note(row: dict, job: Job) -> str | None:
     except ConfigError:                    # the preset's recipe no longer resolves: the row is stale
         return "config"
     then = row.get("identity")
-    git = f" (git {row['git_commit'][:7]})" if row.get("git_commit") else ""
     if not isinstance(then, dict):        # made before identities were recorded: its recipe is unknown
         return "config"
     if any(then.get(k) != now[k] for k in ("config", "inputs", "placement")):

@@ -90,7 +90,7 @@ class SceneJob:
         manifest = self.dir / "manifest.json"
         if not manifest.exists():
             return False
-        if json.loads(manifest.read_text()).get("config_sha256") != self.fingerprint:
+        if not scene_folder.same_config(json.loads(manifest.read_text()), self.cfg):
             raise ValueError(f"{self.dir} holds a complete scene generated with another config; "
                              "remove it or choose another --out")
         return True

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 
-import common
 from common import provenance
 from common.config import dump_config
 from common.color import rec709_luma
@@ -30,8 +29,10 @@ from scene_format.transforms import write_transforms as _write_transforms_file
 FORMAT_VERSION = 1
 
 
-def config_fingerprint(cfg: SceneConfig) -> str:
-    """What a finished scene folder was made with. A scene built in code leaves `source` out, so
+def config_fingerprint(cfg: SceneConfig, release: str | None = None) -> str:
+    """What a finished scene folder was made with: the scene config and the folder's format version,
+    not the toolkit's release (a new release that writes the same files keeps every dataset;
+    `release`: the fingerprint of a folder written by release 0.2 or earlier, which hashed it). A scene built in code leaves `source` out, so
     folders generated before scenes could come from files keep their fingerprint; `formats` (extra
     exports, datagen.exports) changes nothing in the scene and is left out, and so is `ground_truth`
     when off; `blur.fit` is left out
@@ -52,7 +53,18 @@ def config_fingerprint(cfg: SceneConfig) -> str:
         data["render"].pop("adaptive_px")
         data["render"].pop("max_stride")
     text = yaml.safe_dump(data, sort_keys=False)
-    return hashlib.sha256(f"{FORMAT_VERSION}\n{common.__version__}\n{text}".encode()).hexdigest()
+    head = f"{FORMAT_VERSION}\n{release}\n" if release is not None else f"{FORMAT_VERSION}\n"
+    return hashlib.sha256(f"{head}{text}".encode()).hexdigest()
+
+
+def same_config(manifest: dict, cfg: SceneConfig) -> bool:
+    """Whether a manifest's `config_sha256` is `cfg`'s fingerprint, or the fingerprint a release up to
+    0.2 (which hashed its version, recorded in the manifest's versions.toolkit) gave the same config."""
+    recorded = manifest.get("config_sha256")
+    if recorded == config_fingerprint(cfg):
+        return True
+    release = (manifest.get("versions") or {}).get("toolkit")
+    return isinstance(release, str) and recorded == config_fingerprint(cfg, release)
 
 
 

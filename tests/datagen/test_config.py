@@ -107,3 +107,20 @@ def test_a_scene_name_must_be_a_plain_folder_name(name):
     with pytest.raises(ConfigError, match="name: expected a folder name"):
         from_dict(SceneConfig, {"name": name, "kind": "object"})
     assert from_dict(SceneConfig, {"name": "hinge_x37.6", "kind": "object"}).name == "hinge_x37.6"
+
+
+def test_a_scene_fingerprint_follows_its_config_not_the_release(monkeypatch):
+    """A new release that writes the same files keeps every finished dataset; a folder written by 0.2
+    (whose fingerprint hashed the release) is still recognised; another config is not."""
+    import common
+    from datagen.scene_folder import config_fingerprint, same_config
+
+    cfg = resolve_scene("cubes", load_preset("tiny").overrides)
+    before = config_fingerprint(cfg)
+    monkeypatch.setattr(common, "__version__", "0.3.0")
+    assert config_fingerprint(cfg) == before
+    old = {"config_sha256": config_fingerprint(cfg, "0.2.0"), "versions": {"toolkit": "0.2.0"}}
+    assert old["config_sha256"] != before and same_config(old, cfg) and same_config({"config_sha256": before}, cfg)
+    other = resolve_scene("cubes", {**load_preset("tiny").overrides, "seed": 12345})
+    assert config_fingerprint(other) != before and not same_config(old, other)
+    assert not same_config({"config_sha256": before, "versions": {"toolkit": 7}}, other)
