@@ -131,13 +131,19 @@ def add_verify_parser(sub) -> None:
     p = sub.add_parser("verify", help="recompute a results folder's scores from its kept renders and check them",
                        description="For every row of <results>/results.jsonl: checks the SHA-256 of its per-view file "
                                    "and of every scored render, recomputes each view's PSNR / SSIM / LPIPS (and the "
-                                   "dynamic-region ones) from the render and the scene's ground truth, and the row's "
-                                   "means from them; names the first view that does not match. Exit 1 on a mismatch.")
+                                   "dynamic-region ones) from the render and the scene's ground truth, the row's "
+                                   "means and counts from them, its floor from the untrained model's kept views, "
+                                   "its training seconds, iterations and label from its run folder and preset; "
+                                   "names the first thing that does not match. Exit 1 on a mismatch, and on a row "
+                                   "that cannot be verified unless --allow-unverifiable names it.")
     p.add_argument("results", type=Path, help="a results folder (runs/quick)")
     p.add_argument("--data", type=Path, default=None,
                    help="the dataset root (default data/<dataset> of the preset in <results>/bench.json)")
     p.add_argument("--keys", type=name_list, default=None, help="comma-separated row keys (default: every row)")
     p.add_argument("--no-lpips", action="store_true", help="check LPIPS by the digests only (skips the network)")
+    p.add_argument("--allow-unverifiable", type=name_list, default=[], metavar="KEYS",
+                   help="comma-separated keys of rows that may lack kept views (scored from outside renders, or "
+                        "made before views were kept) without failing the command")
     p.set_defaults(func=run_verify)
 
 
@@ -160,9 +166,12 @@ def run_verify(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise SystemExit(f"error: {exc}") from None
     counts = {s: sum(v.status == s for v in verdicts) for s in ("ok", "mismatch", "unverifiable")}
+    refused = [v.key for v in verdicts if v.status == "unverifiable" and v.key not in args.allow_unverifiable]
     print(f"verify: {counts['ok']} row(s) match their renders, {counts['mismatch']} do not, "
-          f"{counts['unverifiable']} cannot be verified")
-    return 1 if counts["mismatch"] else 0
+          f"{counts['unverifiable']} cannot be verified" + (f" (not allowed: {', '.join(refused[:5])}"
+                                                           f"{' …' if len(refused) > 5 else ''}; "
+                                                           "--allow-unverifiable KEYS accepts them)" if refused else ""))
+    return 1 if counts["mismatch"] or refused else 0
 
 
 def tabled_rows(cfg, rows: list[dict], out: Path, data_root: Path | None = None, reuse_older: bool = False) -> list[dict]:

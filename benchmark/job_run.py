@@ -30,7 +30,7 @@ def job_data_dir(job: Job, data_root: Path) -> Path:
 
 
 def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placement=None, method_cfg=None,
-                   views_out: Path | None = None) -> dict:
+                   views_out: Path | None = None, views_meta: dict | None = None) -> dict:
     """Scores of `model` on the scene's test views through `recon.evaluate`, rendered on the run's
     (device, backend) (default: CPU, auto), over the whole images and, where the scene has dynamic
     masks, over the moving pixels (`*_dyn`); `method_cfg`: the run's config, already resolved."""
@@ -38,7 +38,7 @@ def evaluate_model(model, dataset: SceneDataset, lpips_net: str | None, placemen
 
     device, backend = placement or ("cpu", "auto")
     return evaluate(model, dataset, "test", lpips_net=lpips_net, backend=backend, device=device, config=method_cfg,
-                    views_out=views_out)
+                    views_out=views_out, views_meta=views_meta)
 
 
 def has_masks(job: Job, data_root: Path) -> bool:
@@ -85,10 +85,12 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
     model, placement = result.model, (result.device, result.backend)       # score where it trained
     t1 = time.time()
     lpips_net = cfg.lpips_net if wants_lpips(job, cfg) else None
-    final = evaluate_model(model, dataset, lpips_net, placement, method_cfg, out_root / job.folder / VIEWS_DIR)
+    owner = views_owner(job)
+    final = evaluate_model(model, dataset, lpips_net, placement, method_cfg, out_root / job.folder / VIEWS_DIR, owner)
     # the floor: what the method's own starting model scores after the same correction (an events-only
-    # score means something about events only as far as it rises above this)
-    floor = evaluate_model(result.initial, dataset, None, placement, method_cfg)
+    # score means something about events only as far as it rises above this); its views are kept too
+    floor = evaluate_model(result.initial, dataset, None, placement, method_cfg, out_root / job.folder / FLOOR_VIEWS_DIR,
+                           {**owner, "floor": True})
     snapshots = []
     for row in result.log:
         if "snapshot" not in row:
@@ -108,10 +110,19 @@ def run_job(job: Job, cfg: BenchConfig, data_root: Path, out_root: Path, progres
         eval_s=round(time.time() - t1, 1), snapshots=snapshots, versions=versions(), git_commit=git_commit(),
         lpips_net=lpips_net, recipe=recipe_of(method_cfg), gpu=gpu_name(result.device),
         views_sha256=final["views_sha256"], views_dir=f"{job.folder}/{VIEWS_DIR}",
+        floor_views_sha256=floor["views_sha256"], floor_views_dir=f"{job.folder}/{FLOOR_VIEWS_DIR}",
         masks=masks_digest(job_data_dir(job, data_root))).to_dict()
 
 
 VIEWS_DIR = "views"         # a training folder's scored test views (recon.view_record), the row's audit
+FLOOR_VIEWS_DIR = "floor_views"     # the untrained model's scored views (the row's floor_psnr)
+
+
+def views_owner(job: Job) -> dict:
+    """What a run's kept views belong to, written into views.json and checked by `e4dgs verify`: the
+    training folder, the method, the scene folder and the identity digest."""
+    return {"run_dir": job.folder, "method": job.method, "data_scene": job.data_scene, "dataset": job.dataset,
+            "config_hash": job.config_hash()}
 
 
 def recipe_of(method_cfg) -> dict:

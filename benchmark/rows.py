@@ -90,6 +90,8 @@ class ResultRow:
     recipe: dict = ABSENT             # the resolved fields that decide a result (benchmark.job_run.recipe_of)
     views_sha256: str = ABSENT        # SHA-256 of its views.json (per-view scores, render digests)
     views_dir: str = ABSENT           # that file's folder, relative to the results folder
+    floor_views_sha256: str = ABSENT  # the untrained model's views.json (its floor scores), and its folder
+    floor_views_dir: str = ABSENT
     masks: str = ABSENT               # the dynamic masks it was scored with (scene_format.manifest.masks_digest)
     external: bool | None = ABSENT           # `e4dgs score`: an outside method's renders
     scored_unix: int | None = ABSENT

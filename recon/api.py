@@ -128,7 +128,7 @@ def fit(scene_dir: str | Path | SceneDataset, method: str = "d3dgs", config: Any
 
 def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, split: str = "test",
              lpips_net: str | None = None, backend: str = "auto", device: str | None = None, dynamic: bool = True,
-             config: Any = None, views_out: str | Path | None = None) -> dict:
+             config: Any = None, views_out: str | Path | None = None, views_meta: dict | None = None) -> dict:
     """Scores of a trained model on a scene's held-out views, the way the benchmark scores them: the
     model's own method and config (stored in it) pick the channels and the correction (E-4DGS's
     log-intensity gain / offset), then mean per-image PSNR / SSIM (/ LPIPS with lpips_net); where the
@@ -136,8 +136,9 @@ def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, spli
     `scene_dir` is a scene folder or one already opened. Rendered on `device` (default: where the model
     is) with `backend`. `config`: the model's method config already resolved (default: resolved from
     the model's own). With `views_out`, the predictions are scored as 16-bit images and kept there with
-    every view's scores (recon.view_record: views.json), and the result adds `views_sha256`, the
-    digest of views.json."""
+    every view's scores (recon.view_record: views.json, with `views_meta`: what the caller says the
+    views belong to, e.g. the benchmark's run folder and identity), and the result adds
+    `views_sha256`, the digest of views.json."""
     from common.metrics.image import mean_scores, score_pairs, view_scores
 
     dataset = scene_dir if isinstance(scene_dir, SceneDataset) else SceneDataset(scene_dir)
@@ -162,5 +163,5 @@ def evaluate(model: DynamicGaussians, scene_dir: str | Path | SceneDataset, spli
     means = mean_scores(views)
     digest = write_views(Path(views_out), [r.stem for r in records], preds, views, means,
                          {"scene": dataset.scene.name, "split": split, "lpips_net": lpips_net,
-                          "method": model.meta.method, "iteration": model.meta.iteration})
+                          "method": model.meta.method, "iteration": model.meta.iteration, **(views_meta or {})})
     return {**means, "views_sha256": digest}

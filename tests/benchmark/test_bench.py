@@ -194,7 +194,7 @@ def test_bench_end_to_end_with_resume(motion_scene, tmp_path, monkeypatch):
 
 def _row(study, scene, cell, psnr_db, variant="", ssim_v=0.9, lpips_v=0.1, seed=None):
     return described({"key": "/".join(p for p in (study, scene, cell, variant, "" if seed is None else f"seed{seed}") if p),
-            "study": study, "scene": scene, "cell": cell, "variant": variant, "seed": seed, "psnr": psnr_db, "ssim": ssim_v, "lpips": lpips_v, "iterations": 10,
+            "study": study, "scene": scene, "cell": cell, "variant": variant, "seed": seed, "psnr": psnr_db, "ssim": ssim_v, "lpips": lpips_v, "lpips_net": "vgg", "iterations": 10,
             "wall_s": 100.0, "n_gaussians": 1000, "snapshots": [{"iteration": 5, "wall_s": 50.0, "psnr": psnr_db - 1},
                                                               {"iteration": 10, "wall_s": 100.0, "psnr": psnr_db}]})
 
@@ -505,13 +505,13 @@ def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():
     from benchmark.grid import current_rows
 
     cfg = load_bench("quick")
-    current = [j.identity() for j in jobs(cfg)]
+    current = [{**j.identity(), "lpips_net": cfg.lpips_net} for j in jobs(cfg)]     # scored as the preset scores
     speed_row = next(r for r in current if r["study"] == "speed" and r["variant"] == "x26.2")
     old_speed = {**speed_row, "key": speed_row["key"].replace("x26.2", "x31.6"), "variant": "x31.6"}
     old_cap = {**current[0], "config_hash": "0" * 16}
     outside = {"key": "main/hinge/mine", "study": "main", "config_hash": "abc", "external": True}
-    extra_seed = [j.identity() for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=(7,))))
-                  if j.study == "ablation"]
+    extra_seed = [{**j.identity(), "lpips_net": cfg.lpips_net}
+                  for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=(7,)))) if j.study == "ablation"]
     kept, stale = current_rows(cfg, current + [old_speed, old_cap, outside] + extra_seed)
     assert stale == [old_speed, old_cap]
     order = {s: i for i, s in enumerate(cfg.scenes)}

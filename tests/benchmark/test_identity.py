@@ -349,3 +349,124 @@ def test_reuse_older_never_keeps_a_row_of_another_placement_or_without_an_identi
     assert current_rows(cfg, other, motion_scene.parent, reuse_older=True)[0] == []
     bare = [{k: v for k, v in r.items() if k != "identity"} | {"config_hash": "0" * 16} for r in rows]
     assert current_rows(cfg, bare, motion_scene.parent, reuse_older=True)[0] == []
+
+
+def _forge(out: Path, edit) -> None:
+    """Rewrite results.jsonl with `edit(rows)` applied (rows edited in place)."""
+    from benchmark.rows import write_results
+
+    rows = read_results(out / "results.jsonl")
+    edit(rows)
+    write_results(out / "results.jsonl", rows)
+
+
+def _resign(out: Path, row: dict, doc: dict) -> None:
+    """Write a forged views.json for `row` and point every row that uses it at its new digest."""
+    from recon.view_record import sha256
+
+    text = json.dumps(doc, indent=1, sort_keys=True)
+    (out / row["views_dir"] / "views.json").write_text(text)
+    _forge(out, lambda rows: [r.update(views_sha256=sha256(text.encode())) for r in rows
+                              if r["views_dir"] == row["views_dir"]])
+
+
+@pytest.fixture()
+def forged(benched, tmp_path):
+    out = tmp_path / "runs"
+    shutil.copytree(benched, out)
+    return out
+
+
+def _verify(out: Path, motion_scene: Path, capsys, *extra: str) -> tuple[int, str]:
+    code = e4dgs(["verify", str(out), "--data", str(motion_scene.parent), "--no-lpips", *extra])
+    return code, capsys.readouterr().out
+
+
+def test_verify_refuses_a_cherry_picked_view_set(forged, motion_scene, capsys):
+    from common.metrics.image import mean_scores
+
+    row = next(r for r in read_results(forged / "results.jsonl") if r["cell"] == "e4dgs")
+    doc = json.loads((forged / row["views_dir"] / "views.json").read_text())
+    worst = min(doc["views"], key=lambda v: v["psnr"])
+    doc["views"].remove(worst)
+    (forged / row["views_dir"] / worst["render"]).unlink()
+    means = mean_scores([{k: v for k, v in e.items() if k not in ("view", "render", "render_sha256")}
+                         for e in doc["views"]])
+    doc["means"] = means
+    _resign(forged, row, doc)
+    _forge(forged, lambda rows: [r.update(psnr=means["psnr"], psnr_luma=means["psnr_luma"], ssim=means["ssim"],
+                                          n_test_images=means["n_images"]) for r in rows if r["key"] == row["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and f"verify {row['key']}: mismatch" in said and f"{len(doc['views'])} views, the test split" in said
+
+
+def test_verify_refuses_swapped_and_borrowed_views(forged, motion_scene, capsys):
+    rows = {r["cell"]: r for r in read_results(forged / "results.jsonl")}
+    a, b = rows["e4dgs"], rows["d3dgs_sharp"]
+    moved = ("views_dir", "views_sha256", "psnr", "psnr_luma", "ssim", "lpips", "n_test_images")
+
+    def swap(rs):
+        for r in rs:
+            src = b if r["key"] == a["key"] else a if r["key"] == b["key"] else None
+            if src:
+                r.update({k: src.get(k) for k in moved})
+    _forge(forged, swap)
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and said.count(": mismatch") == 2 and "views_dir" in said
+    # borrowed with its training folder too: the identity no longer makes the folder's name
+    _forge(forged, lambda rs: [r.update({k: b.get(k) for k in moved + ("run_dir",)}) for r in rs if r["key"] == a["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and f"verify {a['key']}: mismatch: run_dir" in said
+    # ... and its identity: views.json says whose they are (method), and the run folder too
+    _forge(forged, lambda rs: [r.update({k: b.get(k) for k in moved + ("run_dir", "identity", "config_hash")})
+                               for r in rs if r["key"] == a["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and f"verify {a['key']}: mismatch" in said
+
+
+def test_verify_takes_the_lpips_network_from_the_row_and_the_preset_never_from_views_json(forged, motion_scene, capsys):
+    row = next(r for r in read_results(forged / "results.jsonl") if r["cell"] == "d3dgs_sharp")
+    doc = json.loads((forged / row["views_dir"] / "views.json").read_text())
+    doc["lpips_net"] = None
+    for v in doc["views"]:
+        v["lpips"] -= 0.1
+    _resign(forged, row, doc)
+    _forge(forged, lambda rs: [r.update(lpips=r["lpips"] - 0.1) for r in rs if r["key"] == row["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and "scored with LPIPS None, the row says 'alex'" in said
+    _forge(forged, lambda rs: [r.update(lpips_net=None) for r in rs if r["key"] == row["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and "with no LPIPS network" in said
+    _forge(forged, lambda rs: [r.update(lpips_net=None, lpips=None) for r in rs if r["key"] == row["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and f"verify {row['key']}: mismatch: row lpips None is not the mean" in said
+
+
+@pytest.mark.parametrize("column, value", [("floor_psnr", 5.0), ("psnr_luma_dyn", 30.0), ("dyn_fraction", 0.5),
+                                           ("n_test_images", 3), ("lpips", None), ("wall_s", 1.0), ("iterations", 400),
+                                           ("label", "E-4DGS (best)"), ("floor_views_dir", "elsewhere/floor_views")])
+def test_verify_checks_every_column_a_table_shows(forged, motion_scene, capsys, column, value):
+    row = next(r for r in read_results(forged / "results.jsonl") if r["cell"] == "e4dgs")
+    if column == "lpips":
+        row = next(r for r in read_results(forged / "results.jsonl") if r["cell"] == "d3dgs_sharp")
+    (forged / "bench.json").write_text(json.dumps({"preset": "tiny", "dataset": "tiny_motion", "lpips_net": "alex",
+                                                   "cells": {"e4dgs": {"label": "E-4DGS (events)"},
+                                                             "d3dgs_sharp": {"label": "D3DGS (sharp RGB)"}}}))
+    assert _verify(forged, motion_scene, capsys)[0] == 0
+    _forge(forged, lambda rs: [r.update({column: value}) for r in rs if r["key"] == row["key"]])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and f"verify {row['key']}: mismatch" in said and (column in said or "LPIPS" in said)
+
+
+def test_a_row_that_cannot_be_verified_fails_unless_allowed_by_name(forged, motion_scene, capsys):
+    rows = read_results(forged / "results.jsonl")
+    a, b = rows[0]["key"], rows[1]["key"]
+    _forge(forged, lambda rs: [r.pop("views_dir") for r in rs if r["key"] == a]
+           + [r.update(external=True) or r.pop("views_sha256") for r in rs if r["key"] == b])
+    code, said = _verify(forged, motion_scene, capsys)
+    assert code == 1 and "2 cannot be verified (not allowed" in said
+    assert _verify(forged, motion_scene, capsys, "--allow-unverifiable", a)[0] == 1
+    assert _verify(forged, motion_scene, capsys, "--allow-unverifiable", f"{a},{b}")[0] == 0
+    (forged / "results.jsonl").write_text("")
+    with pytest.raises(SystemExit, match="no scored rows to verify"):       # an empty results file: not OK
+        _verify(forged, motion_scene, capsys)
