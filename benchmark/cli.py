@@ -25,6 +25,9 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--studies", type=name_list, default="main,blur,ablation",
                    help="which studies to run: main, blur, ablation, speed (default main,blur,ablation; the speed "
                         "study runs only when named, as `make speed-study`)")
+    p.add_argument("--seed-axes", type=name_list, default=None,
+                   help="what each of --seeds varies, comma-separated among train (training's random draws) and init "
+                        "(the initial points); default: the preset's seed_axes (train,init)")
     p.add_argument("--ablation-seeds", default=None,
                    help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")
     p.add_argument("--seeds", type=int_in(1, 100, "training seeds per cell"), default=None,
@@ -212,6 +215,13 @@ def run_bench_cli(args: argparse.Namespace) -> int:
                              f"({exc})") from None
     if args.seeds is not None:
         cfg = replace(cfg, seeds=args.seeds)
+    if args.seed_axes is not None:
+        from benchmark.config import SEED_AXES
+
+        if not args.seed_axes or any(a not in SEED_AXES for a in args.seed_axes):
+            raise SystemExit(f"error: --seed-axes: expected names among {', '.join(SEED_AXES)}, got "
+                             f"{','.join(args.seed_axes)!r}")
+        cfg = replace(cfg, seed_axes=tuple(dict.fromkeys(args.seed_axes)))
     out = args.out or Path("runs") / name
     data_root = args.data or Path("data") / cfg.dataset
     inside = output_inside_input(out, {"--data": data_root})

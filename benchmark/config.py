@@ -94,9 +94,13 @@ class BenchConfig:
     # gives every cell the same training seconds on a slower scene: {scene: {cell: {dotted key: value}}}
     scene_overrides: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     lpips_net: str = "vgg"
-    # training seeds of every main cell (train.seed 0 .. seeds-1; `e4dgs bench --seeds N`): the tables
-    # give the mean and spread over them, and call differences within the spread ties
+    # seeds of every main cell (0 .. seeds-1; `e4dgs bench --seeds N`): the tables give the mean and
+    # spread over them, and call differences within the spread ties
     seeds: int = 1
+    # what a seed varies (`e4dgs bench --seed-axes`): `train` (train.seed: the order of views and
+    # windows, every random draw of training) and `init` (train.init.seed: the initial points); the
+    # leaderboard's note names them
+    seed_axes: tuple[str, ...] = ("train", "init")
     # the seed spread (standard deviation over training seeds) of each cell's scores on one scene, as
     # measured (docs/results/benchmark.md): what the tables take as a one-seed cell's spread where results.jsonl
     # holds no cell of its kind at two seeds or more: {cell: {psnr: dB, ssim: ..., lpips: ...}}
@@ -107,6 +111,9 @@ class BenchConfig:
     def __post_init__(self):
         if not self.cells:
             raise ConfigError("cells: expected at least one cell ({name: {method: ..., config: ..., label: ...}})")
+        bad = [a for a in self.seed_axes if a not in SEED_AXES]
+        if not self.seed_axes or bad or len(set(self.seed_axes)) != len(self.seed_axes):
+            raise ConfigError(f"seed_axes: expected distinct names among {', '.join(SEED_AXES)}, got {list(self.seed_axes)!r}")
         for c in self.blur.cells if self.blur.scene else ():      # a study's cells matter when it runs
             if c not in self.cells:
                 raise ConfigError(f"blur.cells: {c!r} is not a cell")
@@ -195,3 +202,4 @@ def dump(cfg: BenchConfig) -> dict:
 
 
 BenchConfig.BOUNDS = {"seeds": (1, 100, "training seeds per cell")}
+SEED_AXES = {"train": "train.seed", "init": "train.init.seed"}     # axis -> the config field a seed sets

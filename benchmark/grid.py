@@ -229,12 +229,20 @@ def jobs(cfg: BenchConfig, data_root: Path | None = None) -> list[Job]:
     return [replace(_described(cfg, j), data_root=root) for j in _jobs(cfg)]
 
 
+def seed_overrides(cfg: BenchConfig, seed: int) -> dict[str, int]:
+    """The config fields seed `seed` sets: every field of the preset's seed_axes (benchmark.config.
+    SEED_AXES); seed 0 sets none (the configs' defaults are 0)."""
+    from benchmark.config import SEED_AXES
+
+    return {SEED_AXES[a]: seed for a in cfg.seed_axes} if seed else {}
+
+
 def _jobs(cfg: BenchConfig) -> list[Job]:
     out: list[Job] = []
     for seed in range(cfg.seeds):      # seed 0 (the configs' default) keeps the plain key
         for scene in cfg.scenes:
             for name, c in cfg.cells.items():
-                seeded = {"train.seed": seed} if seed else {}
+                seeded = seed_overrides(cfg, seed)
                 out.append(Job("main", scene, name, "", c.method, c.config,
                                {**_at_speed(cfg, scene, name, cfg.cell_speed(name)), **seeded},
                                seed=seed or None, speed=cfg.cell_speed(name)))
@@ -271,7 +279,7 @@ def _jobs(cfg: BenchConfig) -> list[Job]:
     if a.scene:
         c = cfg.cells[a.base]
         for seed in a.seeds:
-            seeded = {"train.seed": seed} if seed != 0 else {}
+            seeded = seed_overrides(cfg, seed)
             for variant, switch in [("full", {})] + list(a.switches.items()):
                 out.append(Job("ablation", a.scene, a.base, variant, c.method, c.config,
                                {**cfg.overrides(a.scene, a.base), **switch, **seeded}, seed))
