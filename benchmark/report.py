@@ -19,7 +19,8 @@ from pathlib import Path
 
 from benchmark.rows import cell_order, describe_rows, labels_of, sees_rgb
 from benchmark.speed_report import SpeedRoles, plot_speed, speed_tables
-from benchmark.ties import average_error, mean_sd, combine_seeds, pooled_spread, rank_with_ties, standard_error
+from benchmark.ties import (ALPHA, average_error, combine_seeds, degrees_of_freedom, mean_sd, pooled_spread,
+                            rank_with_ties, standard_error, welch_df)
 from common.fileio import atomic_output, write_text_atomic
 
 METRICS = (("psnr", "PSNR↑", True), ("ssim", "SSIM↑", True), ("lpips", "LPIPS↓", False))
@@ -78,12 +79,15 @@ def column_ranks(table, cells: list[str], scenes: list[str], col: tuple[str, str
         if scene == "average":
             m = _average(table, c, scenes, key)
             rows = [table[c].get(s) for s in scenes]
-            se = average_error([standard_error(r, key, spreads.get(c)) for r in rows]) if None not in rows else None
+            errors = [standard_error(r, key, spreads.get(c)) for r in rows] if None not in rows else [None]
+            se = average_error(errors)
+            df = welch_df(errors, [degrees_of_freedom(r, key) for r in rows]) if se else math.inf
         else:
             r = table[c].get(scene)
             m = r.get(key) if r else None
             se = standard_error(r, key, spreads.get(c)) if r else None
-        values[c] = (m, se) if m is not None else None
+            df = degrees_of_freedom(r, key) if r else math.inf
+        values[c] = (m, se, df) if m is not None else None
     return rank_with_ties(values, higher)
 
 
@@ -195,10 +199,16 @@ def spread_note(table, cells: list[str], scenes: list[str], labels: dict[str, st
     where, and which rows come from another version (†)."""
     out = io.StringIO()
     n = sorted({r.get("n_seeds", 1) for c in cells for r in table[c].values()})
-    out.write(f"\nSeeds per cell: {', '.join(map(str, n))}; a cell with several shows mean ± sample standard deviation. "
-              "Bold / underline mark a best / second best that differs from the next by more than twice the standard "
-              "error of the difference (the seeds' sd / sqrt(seeds); a one-seed cell takes the seed spread of its "
-              "kind); ≈ marks values that tie (within that margin of the group's best).")
+    varied = {"train": "training's random draws", "init": "the initial points"}
+    used = {a for c in cells for r in table[c].values() if r.get("n_seeds", 1) > 1 for a in r.get("seed_axes", ())}
+    axes = [a for a in varied if a in used] + sorted(used - set(varied))
+    what = f" (a seed varies {' and '.join(varied.get(a, a) for a in axes)}; the dataset is one realisation)" if axes else ""
+    out.write(f"\nSeeds per cell: {', '.join(map(str, n))}{what}; a cell with several shows mean ± sample standard deviation. "
+              f"Bold / underline mark the best / second group: each of its values is better than every value below "
+              f"it by Welch's t-test at {ALPHA:g} (two-sided; standard errors from the seeds' sd / sqrt(seeds) with "
+              f"seeds - 1 degrees of freedom, a one-seed cell taking the seed spread of its kind), so two cells with "
+              f"equal true means are called different {ALPHA:.0%} of the time; ≈ marks a group of several, which "
+              "the seeds cannot separate.")
     missing = [labels.get(c, c) for c in cells if c not in spreads and all(r.get("n_seeds", 1) == 1 for r in table[c].values())]
     known = [f"{labels.get(c, c)} {spreads[c]['psnr']:.2f} dB ({source[c]})" for c in cells if c in spreads and "psnr" in spreads[c]]
     if known:

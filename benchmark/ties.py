@@ -4,9 +4,21 @@ to have, and the ranking of a table column that calls differences within the spr
 A benchmark cell trained at seeds 0..N-1 (`e4dgs bench --seeds N`) is shown as the mean and the
 sample standard deviation over its seeds; its standard error is sd / sqrt(N). A cell with one seed
 takes the spread of its kind: the pooled standard deviation of the same cell over the scenes where
-the results hold two seeds or more, else the preset's measured `seed_spread`. Two cells of a column
-differ when their means are further apart than twice the standard error of the difference,
-2 sqrt(se_a^2 + se_b^2) (about 95 % for normal spreads); otherwise they tie.
+the results hold two seeds or more, else the preset's measured `seed_spread`.
+
+Two cells of a column differ when Welch's t-test rejects equal means at ALPHA = 0.05 (two-sided):
+|m_a - m_b| > t(1 - ALPHA/2, df) sqrt(se_a^2 + se_b^2), with the Welch-Satterthwaite degrees of
+freedom df = (se_a^2 + se_b^2)^2 / (se_a^4 / df_a + se_b^4 / df_b), df = seeds - 1 for a cell's own
+spread (a borrowed spread, measured over many seeds, counts as known: df infinite). Two cells with
+equal true means are then called different 5 % of the time at any seed count (the old rule, twice
+the standard error of the difference, did so 11.5-18 % of the time at 3 seeds: the t quantile at 4
+degrees of freedom is 2.78, not 2).
+
+Groups cannot contradict themselves: the column is sorted, and it is cut between two neighbours
+only where every cell above the cut differs from every cell below it (in the current group). The
+first group is bold, the second underlined; a group of several is a tie (≈). So a bold value is
+significantly better than every value that is not bold, and an underlined one than every value
+below it.
 """
 from __future__ import annotations
 
@@ -16,7 +28,7 @@ import math
 AVERAGED = ("psnr", "ssim", "lpips", "psnr_luma", "psnr_dyn", "psnr_luma_dyn", "ssim_dyn", "lpips_dyn",
             "dyn_fraction", "floor_psnr", "floor_psnr_luma", "floor_psnr_dyn", "wall_s", "n_gaussians")
 SPREAD_KEYS = ("psnr", "ssim", "lpips", "psnr_luma", "psnr_dyn", "ssim_dyn", "lpips_dyn")
-Z = 2.0        # differences beyond Z standard errors of the difference are called differences
+ALPHA = 0.05   # two-sided false-call rate of one comparison of two cells with equal true means
 
 
 def mean_sd(values: list[float]) -> tuple[float, float]:
@@ -28,7 +40,8 @@ def mean_sd(values: list[float]) -> tuple[float, float]:
 
 def combine_seeds(rows: list[dict]) -> dict:
     """One cell on one scene from its rows at several seeds: the lowest seed's row with the AVERAGED
-    columns replaced by their means, `seeds` (the seeds, 0 for the default), `n_seeds`, `spread`
+    columns replaced by their means, `seeds` (the seeds, 0 for the default), `n_seeds`, `seed_axes`
+    (what the seeds varied, benchmark.config.SEED_AXES, read from the rows' overrides), `spread`
     ({metric: sample sd}, with two seeds or more) and `older` (the first row's note, if one is kept
     from another version)."""
     rows = sorted(rows, key=lambda r: r.get("seed") or 0)
@@ -40,7 +53,10 @@ def combine_seeds(rows: list[dict]) -> dict:
             out[k], sd = mean_sd([float(v) for v in vals])
             if k in SPREAD_KEYS and len(vals) > 1:
                 spread[k] = sd
-    out.update(seeds=[r.get("seed") or 0 for r in rows], n_seeds=len(rows), spread=spread,
+    from benchmark.config import SEED_AXES
+
+    axes = [a for a, f in SEED_AXES.items() if any(f in (r.get("overrides") or {}) for r in rows)]
+    out.update(seeds=[r.get("seed") or 0 for r in rows], n_seeds=len(rows), spread=spread, seed_axes=axes,
                older=next((r["older"] for r in rows if r.get("older")), None))
     return out
 
@@ -68,6 +84,13 @@ def standard_error(row: dict, key: str, kind_spread: dict[str, float] | None) ->
     return (kind_spread or {}).get(key)
 
 
+def degrees_of_freedom(row: dict, key: str) -> float:
+    """The degrees of freedom of standard_error(row, key): seeds - 1 for its own spread, infinite for
+    a borrowed one (a measured kind spread)."""
+    n = row.get("n_seeds", 1)
+    return float(n - 1) if n > 1 and key in (row.get("spread") or {}) else math.inf
+
+
 def average_error(errors: list[float | None]) -> float | None:
     """Standard error of a mean over scenes of independent values with these errors."""
     if not errors or any(e is None for e in errors):
@@ -75,26 +98,53 @@ def average_error(errors: list[float | None]) -> float | None:
     return math.sqrt(sum(e * e for e in errors)) / len(errors)
 
 
-def differ(a: tuple[float, float | None], b: tuple[float, float | None]) -> bool:
-    """Whether two (mean, standard error) values differ: further apart than Z standard errors of the
-    difference (an unknown error counts as 0: plain ranking)."""
-    se = math.sqrt((a[1] or 0.0) ** 2 + (b[1] or 0.0) ** 2)
-    return abs(a[0] - b[0]) > Z * se
+def welch_df(errors: list[float], dfs: list[float]) -> float:
+    """Welch-Satterthwaite degrees of freedom of a sum of independent terms with these standard errors
+    and degrees of freedom (infinite terms add none to the denominator)."""
+    num = sum(e * e for e in errors) ** 2
+    den = sum(e ** 4 / d for e, d in zip(errors, dfs) if math.isfinite(d) and d > 0)
+    return num / den if den > 0 else math.inf
 
 
-def rank_with_ties(values: dict[str, tuple[float, float | None] | None], higher: bool) -> dict[str, str]:
-    """cell -> "best", "best=" (tied for best), "second", "second=" or "" for one column of
-    (mean, standard error) values (None: no value). The best group is every cell that does not differ
-    from the top one; the second group likewise among the rest."""
+def critical_t(df: float, alpha: float = ALPHA) -> float:
+    """The two-sided critical value of Student's t at `df` degrees of freedom (normal for infinite)."""
+    from scipy import stats
+
+    return float(stats.norm.ppf(1 - alpha / 2) if not math.isfinite(df) else stats.t.ppf(1 - alpha / 2, df))
+
+
+Value = tuple  # (mean, standard error or None, degrees of freedom (default infinite))
+
+
+def differ(a: Value, b: Value, alpha: float = ALPHA) -> bool:
+    """Whether two (mean, standard error[, degrees of freedom]) values differ by Welch's t-test at
+    `alpha` (an unknown or zero error on both: plain ranking, any difference counts)."""
+    se_a, se_b = a[1] or 0.0, b[1] or 0.0
+    se = math.sqrt(se_a ** 2 + se_b ** 2)
+    if se == 0.0:
+        return a[0] != b[0]
+    df = welch_df([se_a, se_b], [a[2] if len(a) > 2 else math.inf, b[2] if len(b) > 2 else math.inf])
+    return abs(a[0] - b[0]) > critical_t(df, alpha) * se
+
+
+def rank_with_ties(values: dict[str, Value | None], higher: bool, alpha: float = ALPHA) -> dict[str, str]:
+    """cell -> "best", "best=" (a tie for best), "second", "second=" or "" for one column of (mean,
+    standard error[, df]) values (None: no value). Sorted, the column is cut before a cell only where
+    every cell of the current group above differs from every cell from there down (module note): the
+    first group is best, the second second."""
     valid = [(v, c) for c, v in values.items() if v is not None]
     order = [c for v, c in sorted(valid, key=lambda vc: vc[0][0], reverse=higher)]
     out = {c: "" for c in values}
-    for rank in ("best", "second"):
-        if not order:
-            break
-        top = values[order[0]]
-        group = [c for c in order if c == order[0] or not differ(top, values[c])]
+    groups: list[list[str]] = []
+    current: list[str] = []
+    for i, c in enumerate(order):
+        if current and all(differ(values[a], values[b], alpha) for a in current for b in order[i:]):
+            groups.append(current)
+            current = []
+        current.append(c)
+    if current:
+        groups.append(current)
+    for rank, group in zip(("best", "second"), groups):
         for c in group:
             out[c] = rank if len(group) == 1 else rank + "="
-        order = [c for c in order if c not in group]
     return out

@@ -233,7 +233,7 @@ def test_report_from_stored_results(tmp_path):
     assert "5 @ 50 s → 19.00" in (tmp_path / "accuracy_vs_time.md").read_text()
 
 
-def test_ablation_seeds_vary_only_the_training_seed_and_seed_0_is_the_main_run():
+def test_ablation_seeds_vary_the_seed_axes_and_seed_0_is_the_main_run():
     cells = {c: CellSpec("e4dgs" if c.startswith("e4dgs") else "d3dgs") for c in MAIN_CELLS}
     cfg = build_config(BenchConfig, {"scenes": ["s"], "cells": cells,
                                      "ablation": {"scene": "s", "seeds": [0, 3],
@@ -242,7 +242,11 @@ def test_ablation_seeds_vary_only_the_training_seed_and_seed_0_is_the_main_run()
     assert sorted(j.key for j in abl) == ["ablation/s/e4dgs/full/seed0", "ablation/s/e4dgs/full/seed3",
                                           "ablation/s/e4dgs/w/o AES/seed0", "ablation/s/e4dgs/w/o AES/seed3"]
     by = {j.key: j for j in abl}
-    assert by["ablation/s/e4dgs/w/o AES/seed3"].overrides == {"events.aes": False, "train.seed": 3}
+    assert by["ablation/s/e4dgs/w/o AES/seed3"].overrides == {"events.aes": False, "train.seed": 3, "train.init.seed": 3}
+    only_train = build_config(BenchConfig, {"scenes": ["s"], "cells": cells, "seed_axes": ["train"], "seeds": 2})
+    assert next(j for j in jobs(only_train) if j.key == "main/s/e4dgs/seed1").overrides == {"train.seed": 1}
+    with pytest.raises(ConfigError, match="seed_axes"):
+        build_config(BenchConfig, {"scenes": ["s"], "cells": cells, "seed_axes": ["noise"]})
     assert by["ablation/s/e4dgs/w/o AES/seed0"].overrides == {"events.aes": False}
     main = next(j for j in jobs(cfg) if j.key == "main/s/e4dgs")
     assert by["ablation/s/e4dgs/full/seed0"].config_hash() == main.config_hash()   # trained once
