@@ -3,15 +3,18 @@ and optical flow of a view, and the DSEC-Flow file convention.
 
 The renderer side (`datagen.render_geometry.surface_views`) casts the ray through every pixel centre
 of a view at its rendered time and keeps, per pixel that meets a surface, the hit's world point,
-its face normal, its part and its coordinates on that part (a point in the part's frame, or a
+its shading normal (corner normals interpolated, as the renderer shades it), its part and its coordinates on that part (a point in the part's frame, or a
 triangle and barycentric coordinates on a deforming mesh, `blur_geometry.track_world`). From those:
 
 - depth: z-depth in the camera frame, metres (OpenCV axes: z forward); 0 where no surface is seen;
-- normals: unit face normals in the camera frame, turned to face the camera; 0 where no surface;
+- normals: unit shading normals in the camera frame, turned to face the camera; 0 where no surface;
 - ids: the part's id (1 + its index in the scene's `objects` table), 0 where no surface;
 - forward flow to a later time: where the surface point seen at each pixel is at that time, minus
   the pixel (camera and object motion both), valid where the point is in front of the camera, inside
-  the image and not occluded there (a depth test against that time's depth map);
+  the image and visible there: the renderer casts a ray from that time's camera centre to the
+  tracked point through that time's geometry, and the point is occluded where the ray meets a
+  surface before it (not by a depth test at the pixel it lands in, which is wrong within a pixel of
+  every edge and calls a point landing on background occluded);
 - instantaneous flow: the image velocity of the point, pixels per millisecond of real time, by a
   central difference over the neighbouring rendered timestamps.
 
@@ -26,7 +29,11 @@ import numpy as np
 from datagen.blur_geometry import NEAR_M, project_tracks, track_world
 from scene_format.config import GROUND_TRUTH_KINDS as KINDS  # noqa: F401  (re-exported)
 
-OCCLUSION_REL = 0.02        # a tracked point is occluded where the later depth map is nearer by > 2 %
+# A ray cast to a tracked point stops short of it by this fraction of its length (plus VISIBLE_ABS_M) so
+# that the point's own surface does not hide it: the BVH runs in single precision (depth to a few ulp,
+# 1e-6 at 4 m), and 1e-4 is 0.4 mm at 4 m, far below any gap between two surfaces of a scene.
+VISIBLE_REL = 1e-4
+VISIBLE_ABS_M = 1e-5
 
 
 @dataclass
@@ -36,7 +43,7 @@ class ViewSurface:
     local: np.ndarray        # [M, 3] the M hits in their part's frame (or triangle, b1, b2 on a deforming part)
     obj: np.ndarray          # int [M] part index
     world: np.ndarray        # [M, 3] world points
-    normal: np.ndarray       # [M, 3] world face normals (unit)
+    normal: np.ndarray       # [M, 3] world shading normals (unit)
 
 
 def _image(hit: np.ndarray, values: np.ndarray, width: int, height: int, dtype, fill=0) -> np.ndarray:
@@ -58,7 +65,7 @@ def depth_image(s: ViewSurface, c2w: np.ndarray, width: int, height: int) -> np.
 
 
 def normal_image(s: ViewSurface, c2w: np.ndarray, width: int, height: int) -> np.ndarray:
-    """float32 [H, W, 3] unit face normals in the camera frame, facing the camera; 0 where no surface."""
+    """float32 [H, W, 3] unit shading normals in the camera frame, facing the camera; 0 where no surface."""
     n = s.normal @ c2w[:3, :3]                       # world -> camera: R^T n, as row vectors
     view = camera_points(s.world, c2w)               # from the camera centre to the point
     n = np.where((np.sum(n * view, 1) > 0)[:, None], -n, n)
@@ -77,30 +84,50 @@ def pixel_centres(width: int, height: int) -> np.ndarray:
     return np.stack([x.ravel(), y.ravel()], -1)
 
 
+def track_points(s: ViewSurface, motion, times: np.ndarray) -> np.ndarray:
+    """World positions [T', M, 3] of the view's surface points at the rendered time indices `times` [T']
+    (motion: blur_geometry.PartMotion or [T, O, 4, 4] part matrices)."""
+    times = np.asarray(times, np.int64)
+    mats = motion[int(times.min()):int(times.max()) + 1]
+    return track_world(s.local, s.obj, mats)[times - times.min()]
+
+
 def track_uv(s: ViewSurface, motion, poses: np.ndarray, K: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixel positions [T', M, 2] and depths [T', M] of the view's surface points at the rendered
     time indices `times` [T'], seen by the same camera (poses [T, 4, 4] its OpenCV c2w at every
     rendered time; motion: blur_geometry.PartMotion or [T, O, 4, 4] part matrices)."""
     times = np.asarray(times, np.int64)
-    mats = motion[int(times.min()):int(times.max()) + 1]
-    world = track_world(s.local, s.obj, mats)[times - times.min()]
-    return project_tracks(K, poses[times], world)
+    return project_tracks(K, poses[times], track_points(s, motion, times))
 
 
-def forward_flow(s: ViewSurface, uv1: np.ndarray, z1: np.ndarray, depth1: np.ndarray, width: int,
+def lands_inside(uv1: np.ndarray, z1: np.ndarray, width: int, height: int) -> np.ndarray:
+    """bool [M]: the tracked point is in front of the camera (z1 > NEAR_M) and inside the image at
+    the later time (uv1 [M, 2] px, z1 [M] m)."""
+    return (z1 > NEAR_M) & np.all(np.isfinite(uv1), 1) & (uv1[:, 0] >= 0) & (uv1[:, 0] < width) \
+        & (uv1[:, 1] >= 0) & (uv1[:, 1] < height)
+
+
+def ray_stops(origin: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unit directions [M, 3], distances [M]) of the rays a visibility test casts from a camera
+    centre `origin` [3] towards world points [M, 3]: each stops VISIBLE_REL of its length (plus
+    VISIBLE_ABS_M) short of its point, so only a surface strictly in front of the point hides it."""
+    d = points - origin
+    length = np.linalg.norm(d, axis=1)
+    return d / np.maximum(length, 1e-12)[:, None], np.maximum(length * (1 - VISIBLE_REL) - VISIBLE_ABS_M, 0.0)
+
+
+def forward_flow(s: ViewSurface, uv1: np.ndarray, z1: np.ndarray, visible1: np.ndarray, width: int,
                  height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(flow float32 [H, W, 2] px, valid bool [H, W], occluded bool [H, W]) from the view's pixels to
-    where their surface points are at a later time: uv1 [M, 2] and depth z1 [M] there, depth1 [H, W]
-    that time's depth map. Valid: seen now, in front of the camera and inside the image then, and not
-    hidden there (depth1 at the point's pixel not nearer than z1 by more than OCCLUSION_REL)."""
+    where their surface points are at a later time: uv1 [M, 2] and depth z1 [M] there, visible1 bool
+    [M] whether the ray from that time's camera to the point meets nothing before it (the renderer's
+    ray cast, datagen.render_geometry.SurfaceTracer.visible). Valid: in front of the camera, inside
+    the image and visible; occluded: in front and inside but hidden (a point that lands on background
+    with nothing in front of it is visible)."""
     uv0 = pixel_centres(width, height)[np.flatnonzero(s.hit)]
     flow = (uv1 - uv0).astype(np.float32)
-    inside = (z1 > NEAR_M) & np.all(np.isfinite(uv1), 1) & (uv1[:, 0] >= 0) & (uv1[:, 0] < width) \
-        & (uv1[:, 1] >= 0) & (uv1[:, 1] < height)
-    occluded = np.zeros(len(uv1), bool)
-    px = np.clip(np.floor(np.nan_to_num(uv1[inside])).astype(np.int64), 0, [width - 1, height - 1])
-    d = depth1[px[:, 1], px[:, 0]]
-    occluded[np.flatnonzero(inside)] = (d <= 0) | (d < z1[inside] * (1 - OCCLUSION_REL))
+    inside = lands_inside(uv1, z1, width, height)
+    occluded = inside & ~np.asarray(visible1, bool)
     valid = inside & ~occluded
     return (_image(s.hit, np.where(valid[:, None], flow, 0), width, height, np.float32),
             _image(s.hit, valid, width, height, bool), _image(s.hit, occluded, width, height, bool))

@@ -30,12 +30,15 @@ from datagen import ground_truth as G
 CONVENTIONS = {
     "pixels": "pixel (x, y) is the ray through (x + 0.5, y + 0.5); OpenCV camera axes (x right, y down, z forward)",
     "depth": "z-depth in metres along the camera's z axis (not the ray length); 0 where no surface is seen",
-    "normals": "unit face normals in the camera frame, turned to face the camera; 0 where no surface is seen",
+    "normals": "unit shading normals in the camera frame (the triangle's corner normals interpolated at the point, "
+               "as the renderer shades it: smooth faces vary, flat faces give the face normal), turned to face the "
+               "camera; 0 where no surface is seen",
     "ids": "1 + the index of the scene part seen (objects.json names them); 0 where no surface is seen; static parts "
            "that share a parent are one object, named after its first part (objects.json's joined lists them)",
     "flow": "forward: where the surface point seen at a pixel of kept frame j is at kept frame j + 1, minus the "
-            "pixel (camera and object motion); valid where it is in front of the camera, inside the image and not "
-            "occluded (the later depth map nearer by more than 2 %); DSEC-Flow PNG: channels (x, y, valid), "
+            "pixel (camera and object motion); valid where it is in front of the camera, inside the image and "
+            "visible: the ray from frame j + 1's camera centre to the tracked point meets no surface before it "
+            "(occluded: in front and inside but hidden); DSEC-Flow PNG: channels (x, y, valid), "
             "value = flow * 128 + 2**15",
     "velocity": "px_per_ms: image velocity of the point seen at each pixel, by a central difference over the "
                 "neighbouring rendered timestamps, pixels per millisecond of the scene's time (a speed variant's: "
@@ -64,11 +67,10 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     frames: dict = {}                                   # linear kept frames read for the warp check, each once
     for j, i in enumerate(job.kept.tolist()):
         surf = tracer.views_at(i, {k: job.poses[k, i] for k in range(C)}, K, W, H)
-        depth = {k: G.depth_image(s, job.poses[k, i], W, H) for k, s in surf.items()}
         for k, s in surf.items():
             name = f"cam{k}/{j:05d}"
             if "depth" in kinds:
-                write_exr(d / "depth" / f"{name}.exr", depth[k])
+                write_exr(d / "depth" / f"{name}.exr", G.depth_image(s, job.poses[k, i], W, H))
             if "normals" in kinds:
                 write_exr(d / "normals" / f"{name}.exr", G.normal_image(s, job.poses[k, i], W, H))
             if "ids" in kinds:
@@ -81,7 +83,7 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
                 _save_npz(d / "velocity" / f"cam{k}" / f"{j:05d}.npz",
                           px_per_ms=G.instant_flow(uv[0], uv[1], (b - a) * dt_ms, s.hit, W, H))
             if prev is not None:
-                _write_forward(job, d, prev, i, depth, tracer.motion, frames, warp, identity)
+                _write_forward(job, d, prev, i, tracer, frames, warp, identity)
         prev = (j, surf)
     events_by_object = None
     if "ids" in kinds:
@@ -105,15 +107,20 @@ def write_ground_truth(job, kinds: tuple[str, ...], log=print) -> dict:
     return out
 
 
-def _write_forward(job, d, prev, i1: int, depth1: dict, motion, frames: dict, warp: list, identity: list) -> None:
-    """The forward flow from the previous kept frame to this one (rendered index i1), per camera, and its
+def _write_forward(job, d, prev, i1: int, tracer, frames: dict, warp: list, identity: list) -> None:
+    """The forward flow from the previous kept frame to this one (rendered index i1, the tracer's last
+    views_at), per camera, with each tracked point's visibility by a ray cast in i1's geometry, and its
     warp check (frames: {(camera, j): linear frame}, each read once and dropped once used)."""
     j0, surf0 = prev
     cfg, K = job.cfg, job.intr.K
     W, H = cfg.render.width, cfg.render.height
     for k, s in surf0.items():
-        uv, z = G.track_uv(s, motion, job.poses[k], K, np.array([i1]))
-        fwd, valid, occluded = G.forward_flow(s, uv[0], z[0], depth1[k], W, H)
+        world = G.track_points(s, tracer.motion, np.array([i1]))[0]
+        uv, z = G.project_tracks(K, job.poses[k, i1][None], world[None])
+        inside = G.lands_inside(uv[0], z[0], W, H)
+        visible = np.zeros(len(world), bool)
+        visible[inside] = tracer.visible(world[inside], job.poses[k, i1])
+        fwd, valid, occluded = G.forward_flow(s, uv[0], z[0], visible, W, H)
         folder = d / "flow" / f"cam{k}"
         write_png(folder / f"{j0:05d}.png", encode_dsec_flow(fwd, valid))
         _save_npz(folder / f"{j0:05d}.npz", forward_px=fwd, valid=valid, occluded=occluded)

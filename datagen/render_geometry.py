@@ -72,28 +72,40 @@ class GeometrySampler:
         dg = bpy.context.evaluated_depsgraph_get()
         return np.array([np.array(o.evaluated_get(dg).matrix_world) for o in self.objects], np.float64)
 
-    def _meshes(self, fan: bool = False, only=None):
+    def _meshes(self, fan=False, only=None, normals: bool = False):
         """(local vertices [V, 3], triangles [F, 3], polygon sizes [P]) of every part (or of the parts
-        `only`) at the current time."""
+        `only`) at the current time; `fan`: True, or the set of part indices, triangulated as fans
+        (fan_triangles) instead of Blender's loop triangles. With `normals`, a fourth item: each
+        triangle's corner normals [F, 3, 3] in the part's frame (Blender's shading normals: smooth
+        faces interpolate them, flat faces repeat the face normal)."""
         dg = bpy.context.evaluated_depsgraph_get()
-        for o in (self.objects if only is None else [self.objects[i] for i in only]):
-            ev = o.evaluated_get(dg)
+        indices = range(len(self.objects)) if only is None else only
+        for n in indices:
+            ev = self.objects[n].evaluated_get(dg)
             me = ev.to_mesh()
             co = np.empty(len(me.vertices) * 3)
             me.vertices.foreach_get("co", co)
             sizes = np.empty(len(me.polygons), np.int64)
             me.polygons.foreach_get("loop_total", sizes)
-            if fan:
+            if fan is True or (fan and n in fan):
                 start = np.empty(len(me.polygons), np.int64)
                 me.polygons.foreach_get("loop_start", start)
                 loops = np.empty(len(me.loops), np.int64)
                 me.loops.foreach_get("vertex_index", loops)
                 tri = fan_triangles(start, sizes, loops)
+                corners = fan_triangles(start, sizes, np.arange(len(me.loops)))
             else:
                 me.calc_loop_triangles()
                 tri = np.empty(len(me.loop_triangles) * 3, np.int32)
                 me.loop_triangles.foreach_get("vertices", tri)
-            yield co.reshape(-1, 3), tri.reshape(-1, 3), sizes
+                corners = np.empty(len(me.loop_triangles) * 3, np.int64)
+                me.loop_triangles.foreach_get("loops", corners)
+            out = (co.reshape(-1, 3), tri.reshape(-1, 3), sizes)
+            if normals:
+                cn = np.empty(len(me.loops) * 3)
+                me.corner_normals.foreach_get("vector", cn)
+                out += (cn.reshape(-1, 3)[corners.reshape(-1, 3)],)
+            yield out
             ev.to_mesh_clear()
 
     def local_vertices(self) -> list[np.ndarray]:
@@ -134,22 +146,22 @@ class GeometrySampler:
 
     def snapshot(self):
         """The scene's triangles in world space at the current time, as (BVH, part of each triangle [F],
-        part matrices [O, 4, 4], first triangle of each part, world vertices and triangles of each part)
-        for `cast`."""
+        part matrices [O, 4, 4], first triangle of each part, world vertices and triangles of each part,
+        world corner normals of every triangle [F, 3, 3]) for `cast`."""
         mats = self.matrices()
-        verts, tris, owner, firsts, parts, offset, nf = [], [], [], [], [], 0, 0
-        for o, (co, tri, _) in enumerate(self._meshes()):
-            tri = self.deforming.get(o, tri)
+        verts, tris, owner, firsts, parts, corner, offset, nf = [], [], [], [], [], [], 0, 0
+        for o, (co, tri, _, cn) in enumerate(self._meshes(fan=set(self.deforming), normals=True)):
             world = co @ mats[o, :3, :3].T + mats[o, :3, 3]
             verts.append(world)
             tris.append(tri + offset)
             owner.append(np.full(len(tri), o))
             firsts.append(nf)
             parts.append((world, tri))
+            corner.append(cn @ np.linalg.inv(mats[o, :3, :3]))      # normals: the inverse transpose
             offset += len(co)
             nf += len(tri)
         bvh = BVHTree.FromPolygons(np.concatenate(verts).tolist(), np.concatenate(tris).tolist(), epsilon=0.0)
-        return bvh, np.concatenate(owner), mats, np.array(firsts), parts
+        return bvh, np.concatenate(owner), mats, np.array(firsts), parts, np.concatenate(corner)
 
     def cast(self, snapshot, c2w: np.ndarray, K: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """First surface hit of the ray through each pixel [N, 2] of an OpenCV camera c2w [4, 4] in a
@@ -166,19 +178,20 @@ class GeometrySampler:
     def surface(self, snapshot, c2w: np.ndarray, K: np.ndarray, pixels: np.ndarray):
         """Everything the rays through pixels [N, 2] meet (datagen.ground_truth.ViewSurface): which
         hit, and per hit its point in its part's frame (or triangle and barycentric coordinates on
-        a deforming part), its part, its world point and its world face normal."""
+        a deforming part), its part, its world point and its world shading normal (the triangle's
+        corner normals interpolated at the hit, as the renderer shades it; the face normal on a flat
+        face)."""
         from datagen.ground_truth import ViewSurface
 
-        bvh, owner, mats, firsts, parts = snapshot
+        bvh, owner, mats, firsts, parts, corner = snapshot
         rays = np.concatenate([pixels, np.ones((len(pixels), 1))], 1) @ np.linalg.inv(K).T @ c2w[:3, :3].T
         origin = mathutils.Vector(c2w[:3, 3].tolist())
         cast, Vector = bvh.ray_cast, mathutils.Vector
-        pts, normals, faces, hit = [], [], [], np.zeros(len(rays), bool)
+        pts, faces, hit = [], [], np.zeros(len(rays), bool)
         for n, d in enumerate(rays.tolist()):
-            loc, normal, face, _dist = cast(origin, Vector(d))
+            loc, _normal, face, _dist = cast(origin, Vector(d))
             if face is not None:
                 pts.append(tuple(loc))
-                normals.append(tuple(normal))
                 faces.append(face)
                 hit[n] = True
         if not pts:
@@ -186,6 +199,7 @@ class GeometrySampler:
             return ViewSurface(hit, empty, np.zeros(0, np.int64), empty, empty)
         pts, faces = np.array(pts, np.float64), np.array(faces, np.int64)
         idx = owner[faces]
+        normal = shading_normals(pts, faces, parts, firsts, owner, corner)
         inv = np.linalg.inv(mats[idx])
         local = np.einsum("nij,nj->ni", inv[:, :3, :3], pts) + inv[:, :3, 3]
         for o in self.deforming:
@@ -195,7 +209,25 @@ class GeometrySampler:
                 f = faces[sel] - firsts[o]
                 b1, b2 = barycentric(pts[sel], world[tri[f, 0]], world[tri[f, 1]], world[tri[f, 2]])
                 local[sel] = np.stack([f.astype(np.float64), b1, b2], -1)
-        return ViewSurface(hit, local, idx, pts, np.array(normals, np.float64))
+        return ViewSurface(hit, local, idx, pts, normal)
+
+
+def shading_normals(pts: np.ndarray, faces: np.ndarray, parts: list, firsts: np.ndarray, owner: np.ndarray,
+                    corner: np.ndarray) -> np.ndarray:
+    """Unit world shading normals [M, 3] at hit points pts [M, 3] on triangles `faces` [M] (global
+    indices; owner [F] their part, firsts the part's first triangle, parts (world vertices, triangles)
+    per part, corner [F, 3, 3] world corner normals): the corner normals interpolated with the hit's
+    barycentric coordinates, as the renderer shades a smooth face (a flat face's corners agree)."""
+    o = owner[faces]
+    tv = np.empty((len(faces), 3, 3))
+    for part in np.unique(o):
+        sel = o == part
+        world, tri = parts[part]
+        tv[sel] = world[tri[faces[sel] - firsts[part]]]
+    b1, b2 = barycentric(pts, tv[:, 0], tv[:, 1], tv[:, 2])
+    c = corner[faces]
+    n = (1.0 - b1 - b2)[:, None] * c[:, 0] + b1[:, None] * c[:, 1] + b2[:, None] * c[:, 2]
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
 
 
 def deform_check_taus(tau: np.ndarray) -> np.ndarray:
@@ -263,6 +295,18 @@ class SurfaceTracer:
     def views_at(self, i: int, c2w: dict[int, np.ndarray], K: np.ndarray, width: int, height: int) -> dict:
         """{camera k: ViewSurface} at rendered-time index i for the cameras' OpenCV poses c2w {k: [4, 4]}."""
         R.set_time(float(self.tau[i]))
-        snap = self.sampler.snapshot()
+        snap = self.snapshot = self.sampler.snapshot()
         pixels = pixel_grid(width, height, 1)
         return {k: self.sampler.surface(snap, pose, K, pixels) for k, pose in sorted(c2w.items())}
+
+    def visible(self, points: np.ndarray, c2w: np.ndarray) -> np.ndarray:
+        """bool [M]: whether each world point [M, 3] is seen from the centre of the camera c2w [4, 4] at
+        the time of the last views_at: the ray to it (datagen.ground_truth.ray_stops) meets no surface of
+        that time's geometry before it."""
+        from datagen.ground_truth import ray_stops
+
+        bvh = self.snapshot[0]
+        dirs, dist = ray_stops(c2w[:3, 3], np.asarray(points, np.float64))
+        origin, Vector, cast = mathutils.Vector(c2w[:3, 3].tolist()), mathutils.Vector, bvh.ray_cast
+        return np.array([cast(origin, Vector(d), float(r))[2] is None for d, r in zip(dirs.tolist(), dist.tolist())],
+                        bool).reshape(len(dist))
