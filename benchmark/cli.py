@@ -121,7 +121,8 @@ def run_score(args: argparse.Namespace) -> int:
     lpips = args.lpips or (cfg.lpips_net if cfg is not None else "vgg")
     rows = score_renders(args.data, args.renders, args.name, args.inputs, args.train_seconds,
                          None if lpips == "none" else lpips,
-                         tuple(cfg.snapshot_metrics) if cfg is not None else ("psnr", "ssim"), args.label)
+                         tuple(cfg.snapshot_metrics) if cfg is not None else ("psnr", "ssim"), args.label,
+                         out_root=out)
     all_rows = append_rows(out / "results.jsonl", rows, tuple(cfg.cells) if cfg is not None else ())
     if cfg is not None:
         all_rows = tabled_rows(cfg, all_rows, out, args.data)

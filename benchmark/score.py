@@ -174,9 +174,12 @@ def _digest(files) -> str:
 
 def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_seconds: float | None = None,
                   lpips_net: str | None = "vgg", snapshot_metrics=("psnr", "ssim"), label: str = "",
-                  log=print) -> list[dict]:
+                  log=print, out_root: Path | None = None) -> list[dict]:
     """Results rows of an outside method's renders, one per scene folder under `renders`. Every file
-    is checked before anything is scored (RenderError names the first bad one)."""
+    is checked before anything is scored (RenderError names the first bad one). With `out_root` (the
+    results folder), the scored predictions are kept there as any bench row's are
+    (`external/<name>/<scene>/views`, recon.view_record) and the final scores are those of the kept
+    16-bit images, so `e4dgs verify` can re-derive them."""
     from benchmark.job_run import data_stats, versions
     from benchmark.rows import ResultRow
     from common.metrics.image import score_pairs
@@ -207,25 +210,52 @@ def score_renders(data_root: Path, renders: Path, name: str, inputs: str, train_
         scene, speed = split_variant(ds.dir.name)
         masks = [ds.dynamic_mask(r) for r in ds.frames("test")]
         masks = masks if any(m is not None for m in masks) else None
-        final = score_pairs(load_pairs(ds, files, seen, images), lpips_net=lpips_net, masks=masks)
+        identity = {"key": f"main/{scene}/{name}", "study": "main", "scene": scene, "cell": name, "variant": "",
+                    "seed": None, "method": name, "label": label or name, "inputs": list(seen), "config": "",
+                    "overrides": {}, "speed": speed, "data_scene": ds.dir.name, "dataset": "",
+                    "config_hash": _digest(sorted(files.values())), "run_dir": str(folder)}
+        pairs = load_pairs(ds, files, seen, images)
+        kept = {}
+        if out_root is None:
+            final = score_pairs(pairs, lpips_net=lpips_net, masks=masks)
+        else:
+            final, kept = _keep_views(pairs, ds, masks, lpips_net, identity, out_root, name)
         snapshots = []
         for seconds, fs in snaps:
             s = score_pairs(load_pairs(ds, fs, seen, images), lpips_net=None)
             snapshots.append({"wall_s": seconds, **{k: s[k] for k in snapshot_metrics if k in s}})
         if train_seconds is not None and not any(abs(p["wall_s"] - train_seconds) < 1e-9 for p in snapshots):
             snapshots.append({"wall_s": train_seconds, **{k: final[k] for k in ("psnr", "ssim", "lpips") if k in final}})
-        identity = {"key": f"main/{scene}/{name}", "study": "main", "scene": scene, "cell": name, "variant": "",
-                    "seed": None, "method": name, "label": label or name, "inputs": list(seen), "config": "",
-                    "overrides": {}, "speed": speed, "data_scene": ds.dir.name, "dataset": "",
-                    "config_hash": _digest(sorted(files.values())), "run_dir": str(folder)}
         rows.append(ResultRow.of(
             identity, final, None, external=True, data=data_stats(ds), iterations=None, n_gaussians=None,
             channels=channels, device="", backend="", precision="", wall_s=train_seconds, train_elapsed_s=None,
             eval_s=round(time.time() - t0, 1), snapshots=sorted(snapshots, key=lambda p: p["wall_s"]),
-            versions=versions(), git_commit=git_commit(), lpips_net=lpips_net, scored_unix=int(time.time())).to_dict())
+            versions=versions(), git_commit=git_commit(), lpips_net=lpips_net, scored_unix=int(time.time()),
+            **kept).to_dict())
         log(f"score: {name} on {ds.dir.name}: PSNR {final['psnr']:.2f} SSIM {final['ssim']:.3f}"
             + (f" LPIPS {final['lpips']:.3f}" if final.get("lpips") is not None else ""))
     return rows
+
+
+EXTERNAL_DIR = "external"      # <results>/external/<name>/<scene>/views: an outside method's kept views
+
+
+def _keep_views(pairs, ds: SceneDataset, masks, lpips_net: str | None, identity: dict, out_root: Path,
+                name: str) -> tuple[dict, dict]:
+    """(scores of the quantized predictions, the row's views columns): the predictions kept as 16-bit
+    PNGs with views.json in the results folder, owned by the row (its key as run folder)."""
+    from common.metrics.image import mean_scores, view_scores
+    from recon.view_record import quantized, write_views
+
+    rel = f"{EXTERNAL_DIR}/{name}/{ds.dir.name}/views"
+    preds = [quantized(p) for p, _ in pairs]
+    views = view_scores([(p, gt) for p, (_, gt) in zip(preds, pairs)], lpips_net, masks)
+    means = mean_scores(views)
+    digest = write_views(Path(out_root) / rel, [r.stem for r in ds.frames("test")], preds, views, means,
+                         {"scene": ds.scene.name, "split": "test", "lpips_net": lpips_net, "method": name,
+                          "run_dir": identity["run_dir"], "data_scene": ds.dir.name, "dataset": "",
+                          "config_hash": identity["config_hash"], "external": True})
+    return means, {"views_dir": rel, "views_sha256": digest}
 
 
 def append_rows(results: Path, new_rows: list[dict], cells: tuple[str, ...] = ()) -> list[dict]:

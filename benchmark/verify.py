@@ -16,8 +16,10 @@ A row is OK only when every number a table shows follows from files the row cann
   kept views (`floor_views_dir`);
 - its run: training seconds and iterations are the run folder's log (log.jsonl's last row), the
   method its run.json's, the label the preset's (bench.json).
-The first thing that fails is named. A row that cannot be checked (scored from outside renders, or
-made before views were kept) is "unverifiable", which fails the command unless allowed by key.
+An outside method's row (`e4dgs score`) keeps its views in `external/<name>/<scene>/views` and is
+checked the same way, but for the identity, floor and run folder it does not have. The first thing
+that fails is named. A row that cannot be checked (made before views were kept) is "unverifiable",
+which fails the command unless allowed by key.
 """
 from __future__ import annotations
 
@@ -100,8 +102,10 @@ def _recomputed_views(folder: Path, digest: str | None, row: dict, dataset, lpip
     if actual != digest:
         raise Mismatch(f"{folder / 'views.json'}: SHA-256 {actual[:12]}… is not the row's {str(digest)[:12]}… "
                        "(the per-view file was changed)")
-    owner = {k: doc.get(k) for k in OWNER} | {"dataset": doc.get("dataset") or "", "floor": bool(doc.get("floor"))}
-    wanted = {k: row.get(k) for k in OWNER} | {"dataset": row.get("dataset") or "", "floor": floor}
+    owner = {k: doc.get(k) for k in OWNER} | {"dataset": doc.get("dataset") or "", "floor": bool(doc.get("floor")),
+                                              "external": bool(doc.get("external"))}
+    wanted = {k: row.get(k) for k in OWNER} | {"dataset": row.get("dataset") or "", "floor": floor,
+                                               "external": bool(row.get("external"))}
     if owner != wanted:
         bad = next(k for k in wanted if owner[k] != wanted[k])
         raise Mismatch(f"{folder / 'views.json'}: belongs to {bad} {owner[bad]!r}, the row's is {wanted[bad]!r} "
@@ -209,10 +213,17 @@ def verify_row(row: dict, out_root: Path, data_root: Path, lpips: bool = True, p
 
     key = row["key"]
     if not row.get("views_dir") or not row.get("views_sha256"):
-        return Verdict(key, "unverifiable", "scored from outside renders" if row.get("external")
+        return Verdict(key, "unverifiable", "scored from outside renders without kept views (score them again "
+                       "with `e4dgs score` to keep them)" if row.get("external")
                        else "made before scored views were kept (train it again to keep them)")
+    external = bool(row.get("external"))
     try:
-        _check_identity(row)
+        if external:               # an outside method's renders: no training folder, its own views folder
+            if row["views_dir"] != f"external/{row.get('cell')}/{row.get('data_scene')}/views":
+                raise Mismatch(f"views_dir {row['views_dir']!r} is not external/{row.get('cell')}/"
+                               f"{row.get('data_scene')}/views")
+        else:
+            _check_identity(row)
         net = _lpips_net(row, preset)
         try:
             dataset = SceneDataset(scene_folder(row, data_root))
@@ -228,7 +239,8 @@ def verify_row(row: dict, out_root: Path, data_root: Path, lpips: bool = True, p
             floor, _ = _recomputed_views(out_root / row["floor_views_dir"], row.get("floor_views_sha256"), row,
                                          dataset, None, floor=True)
             _check_means(row, floor, FLOOR_MEANS, "floor views")
-        _check_run(row, out_root, preset)
+        if not external:
+            _check_run(row, out_root, preset)
     except Mismatch as exc:
         return Verdict(key, "mismatch", str(exc))
     return Verdict(key, "ok", f"{means['n_images']} views" + ("" if recomputed_lpips or not net

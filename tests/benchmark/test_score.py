@@ -68,6 +68,14 @@ def test_score_cli_appends_external_rows_and_the_leaderboard_shows_them(benched,
     mine = stored[f"main/{motion_scene.name}/mine"]
     assert len(stored) == 3 and mine["external"] and mine["wall_s"] == 5.0
     assert [p["wall_s"] for p in mine["snapshots"]] == [2.5, 5.0]
+    # its scored views are kept in the results folder: `e4dgs verify` re-derives the row like a bench row's
+    assert mine["views_dir"] == f"external/mine/{motion_scene.name}/views"
+    verify = ["verify", str(tmp_path), "--data", str(motion_scene.parent), "--keys", mine["key"]]
+    assert e4dgs(verify) == 0
+    doc = json.loads((tmp_path / mine["views_dir"] / "views.json").read_text())
+    png = tmp_path / mine["views_dir"] / doc["views"][0]["render"]
+    png.write_bytes(png.read_bytes()[:-20] + b"\0" * 20)
+    assert e4dgs(verify) == 1
     assert mine["snapshots"][0]["psnr"] == pytest.approx(mine["psnr"], abs=0.5)   # 8-bit PNG of the same model
     board = (tmp_path / "leaderboard.md").read_text()
     assert "| My method (events) |" in board and "Scored from outside renders" in board
