@@ -353,7 +353,9 @@ def older_note(row: dict, job: Job) -> str | None:
     then = row.get("identity")
     if not isinstance(then, dict):        # made before identities were recorded: its recipe is unknown
         return "config"
-    if any(then.get(k) != now[k] for k in ("config", "inputs", "placement")):
+    # a row from before the placement was an identity part: what it recorded running on
+    placement = then.get("placement") or _sha({k: row.get(k) for k in ("device", "backend", "precision")})
+    if then.get("config") != now["config"] or then.get("inputs") != now["inputs"] or placement != now["placement"]:
         return "config"
     parts = [f"code {then.get('code', '?')[:8]}" if then.get("code") != now["code"] else "",
              f"dataset {then.get('dataset', '?')[:8]}" if then.get("dataset") != now["dataset"] else ""]

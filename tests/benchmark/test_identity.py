@@ -471,3 +471,18 @@ def test_a_row_that_cannot_be_verified_fails_unless_allowed_by_name(forged, moti
     (forged / "results.jsonl").write_text("")
     with pytest.raises(SystemExit, match="no scored rows to verify"):       # an empty results file: not OK
         _verify(forged, motion_scene, capsys)
+
+
+def test_reuse_older_keeps_a_row_from_before_placements_were_recorded_only_where_it_ran_the_same(benched,
+                                                                                                  motion_scene):
+    """Rows made before `placement` was an identity part are judged by the device, backend and
+    precision they recorded."""
+    cfg = _cfg(motion_scene)
+    rows = read_results(benched / "results.jsonl")
+    older = [{**r, "config_hash": "0" * 16, "identity": {k: v for k, v in r["identity"].items() if k != "placement"}
+              | {"code": "0123456789abcdef"}} for r in rows]
+    kept, stale = current_rows(cfg, older, motion_scene.parent, reuse_older=True)
+    assert len(kept) == 2 and not stale
+    other = "float32" if rows[0]["precision"] == "bfloat16" else "bfloat16"
+    kept, stale = current_rows(cfg, [{**r, "precision": other} for r in older], motion_scene.parent, reuse_older=True)
+    assert kept == [] and len(stale) == 2
