@@ -172,17 +172,23 @@ def check_row(row, where: str) -> dict:
 
 
 def read_results(path: Path) -> list[dict]:
-    """The rows of a results.jsonl ([] when it does not exist), each checked (check_row)."""
+    """The rows of a results.jsonl ([] when it does not exist), each checked (check_row); ValueError
+    naming the line of a key that appears twice."""
     if not path.exists():
         return []
-    rows = []
+    rows, first = [], {}
     for n, line in enumerate(path.read_text().splitlines(), 1):
         if line.strip():
             try:
                 row = json.loads(line)
             except json.JSONDecodeError as exc:
                 raise ValueError(f"{path}:{n}: not a JSON row ({exc.msg})") from None
-            rows.append(check_row(row, f"{path}:{n}"))
+            row = check_row(row, f"{path}:{n}")
+            if row["key"] in first:         # one row per job: a second would count as another seed
+                raise ValueError(f"{path}:{n}: row {row['key']} again (first on line {first[row['key']]}): a "
+                                 "results file holds one row per job (two results files joined?)")
+            first[row["key"]] = n
+            rows.append(row)
     return rows
 
 

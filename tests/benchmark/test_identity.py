@@ -486,3 +486,10 @@ def test_reuse_older_keeps_a_row_from_before_placements_were_recorded_only_where
     other = "float32" if rows[0]["precision"] == "bfloat16" else "bfloat16"
     kept, stale = current_rows(cfg, [{**r, "precision": other} for r in older], motion_scene.parent, reuse_older=True)
     assert kept == [] and len(stale) == 2
+
+
+def test_a_row_duplicated_by_joining_two_results_files_is_refused_not_counted_as_a_seed(benched, tmp_path):
+    text = (benched / "results.jsonl").read_text()
+    (tmp_path / "results.jsonl").write_text(text + text.splitlines(keepends=True)[0])
+    with pytest.raises(ValueError, match=r"results.jsonl:3: row .* again \(first on line 1\)"):
+        read_results(tmp_path / "results.jsonl")
