@@ -76,6 +76,15 @@ class RawHeader(NamedTuple):
 _HEADER_LINE = re.compile(rb"%[ -~]{0,1023}\r?\n")   # '%', printable ASCII, a line end
 
 
+# Sensor size of each Metavision HAL plug-in, for headers written before `format` / `geometry` lines
+# existed (e.g. a Gen3 VGA camera's EVT 2.0 file: `% plugin_name hal_plugin_gen3_fx3`, `% evt 2.0`).
+# From openeb's hal_psee_plugins raw_constants.h (plugins_map).
+PLUGIN_SENSORS = {"hal_plugin_gen3_fx3": (640, 480), "hal_plugin_gen31_fx3": (640, 480),
+                  "hal_plugin_gen31_evk2": (640, 480), "hal_plugin_gen31_evk3": (640, 480),
+                  "hal_plugin_gen4_fx3": (1280, 720), "hal_plugin_gen4_evk2": (1280, 720),
+                  "hal_plugin_gen41_evk2": (1280, 720), "hal_plugin_gen41_evk3": (1280, 720)}
+
+
 def parse_raw_header(data: bytes, source: str = "file") -> RawHeader:
     """The header of a `.raw` file's bytes. Without a `% end` line (faery writes none) the header is
     the run of lines of '%' and printable ASCII; a first word whose first byte is '%' stays data."""
@@ -108,13 +117,16 @@ def parse_raw_header(data: bytes, source: str = "file") -> RawHeader:
         fmt = {"2.0": "evt2", "3.0": "evt3"}.get(fields["evt"])
     if (width is None or height is None) and "geometry" in fields:
         width, _, height = fields["geometry"].partition("x")
+    if (width is None or height is None) and fields.get("plugin_name") in PLUGIN_SENSORS:
+        width, height = PLUGIN_SENSORS[fields["plugin_name"]]      # older headers name only the camera's plug-in
     if fmt is None:
         raise EvtFormatError(f"{source}: the header names no EVT 2.0 / 3.0 format "
                              f"(format {fields.get('format')!r}, evt {fields.get('evt')!r})")
     try:
         w, h = int(width), int(height)
     except (TypeError, ValueError):
-        raise EvtFormatError(f"{source}: the header gives no sensor size (format / geometry)") from None
+        raise EvtFormatError(f"{source}: the header gives no sensor size (format / geometry, or a known "
+                             f"plugin_name; got {fields.get('plugin_name')!r})") from None
     if not (0 < w <= MAX_SENSOR and 0 < h <= MAX_SENSOR):
         raise EvtFormatError(f"{source}: sensor {w}x{h} outside 1..{MAX_SENSOR} per side")
     t0 = fields.get("t0", "0")
