@@ -20,6 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     from benchmark.cli import add_bench_parser, add_score_parser, add_testviews_parser, add_verify_parser
     from datagen.cli import add_check_parser, add_dataset_parser, add_masks_parser
     from e2vid.cli import add_e2vid_parser, add_train_e2vid_parser
+    from eventio.realism_cli import add_realism_parser
     from recon.cli import add_render_parser, add_train_parser
     from scene_format.convert_cli import add_export_parser, add_import_parser
     from simulator.cli import add_simulate_parser, add_view_parser
@@ -33,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      epilog="`e4dgs COMMAND --help` describes each command.")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of failures")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=CommandParser)
-    for add in (add_dataset_parser, add_check_parser, add_masks_parser, add_simulate_parser,
+    for add in (add_dataset_parser, add_check_parser, add_masks_parser, add_simulate_parser, add_realism_parser,
                 add_train_parser, add_render_parser, add_e2vid_parser, add_train_e2vid_parser,
                 add_bench_parser, add_testviews_parser, add_score_parser, add_verify_parser,
                 add_viewer_parser, add_view_parser,
@@ -44,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # `e4dgs --help` lists the commands by the stage of the work they belong to
-STAGES = (("data", ("dataset", "check", "masks", "simulate")),
+STAGES = (("data", ("dataset", "check", "masks", "simulate", "realism")),
           ("train", ("train", "render", "e2vid", "train-e2vid")),
           ("score", ("bench", "testviews", "score", "verify")),
           ("look", ("viewer", "draw-events")),
