@@ -1,0 +1,38 @@
+"""APS frames as the simulator's input (simulator.aps): the noise removal, the still pixels, the
+temporal upsampling and the events of a pixel whose light doubles, by hand."""
+import math
+
+import numpy as np
+import pytest
+
+from simulator.aps import denoise_aps, simulate_frames, static_pixels, upsampled
+from simulator.config import SimulatorConfig
+
+
+def test_deviations_within_the_threshold_vanish_and_larger_ones_shrink_by_it():
+    dn = np.zeros((5, 1, 3), np.uint8)
+    dn[:, 0, 0] = [10, 12, 8, 10, 11]           # read noise of 2 DN around 10: gone
+    dn[:, 0, 1] = [10, 10, 30, 10, 10]          # a real change of 20 DN: kept, less 4
+    dn[:, 0, 2] = [50, 50, 50, 50, 50]
+    out = denoise_aps(dn, 4.0)
+    assert out[:, 0, 0].tolist() == [10.0] * 5
+    assert out[:, 0, 1].tolist() == [10.0, 10.0, 26.0, 10.0, 10.0]
+    assert static_pixels(out).tolist() == [[True, False, True]]
+
+
+def test_upsampling_interpolates_linear_intensity_between_frame_times():
+    frames = np.stack([np.full((1, 1), 0.2, np.float32), np.full((1, 1), 0.6, np.float32)])
+    got = list(upsampled(frames, np.array([1000, 3000]), rate_hz=1000.0))
+    assert [t for _, t in got] == [1000, 2000, 3000]
+    np.testing.assert_allclose([f[0, 0] for f, _ in got], [0.2, 0.4, 0.6], rtol=1e-6)
+
+
+def test_a_pixel_whose_light_doubles_fires_floor_of_ln2_over_c_on_events():
+    frames = np.stack([np.full((2, 2), 0.25, np.float32), np.full((2, 2), 0.5, np.float32)])
+    frames[1, 0, 0] = 0.25                       # one pixel stays still
+    cfg = SimulatorConfig(pos_threshold=0.2, neg_threshold=0.2, log_eps=1e-9)
+    s = simulate_frames(frames, np.array([0, 40_000]), cfg, rate_hz=2000.0)
+    e = s.events
+    per_pixel = np.bincount(e["y"].astype(int) * 2 + e["x"].astype(int), minlength=4)
+    assert per_pixel.tolist() == [0] + [math.floor(math.log(2) / 0.2)] * 3
+    assert np.all(e["p"] == 1) and e["t"].min() > 0 and e["t"].max() <= 40_000
