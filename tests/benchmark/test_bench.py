@@ -292,8 +292,12 @@ def test_report_refuses_empty_results(tmp_path):
 def test_bench_report_cli_regenerates_without_training(tmp_path):
     from e4dgs.cli import main
 
+    from scene_format.manifest import masks_digest
+
     hashes = {j.key: j.config_hash() for j in jobs(load_bench("quick"))}    # rows of the preset's own jobs
-    rows = [{**_row("main", "lego", c, 20.0 + k), "config_hash": hashes[f"main/lego/{c}"]} for k, c in enumerate(MAIN_CELLS)]
+    masks = masks_digest(Path("data") / "quick" / "lego")       # "none" unless this checkout generated it
+    rows = [{**_row("main", "lego", c, 20.0 + k), "config_hash": hashes[f"main/lego/{c}"], "masks": masks}
+            for k, c in enumerate(MAIN_CELLS)]
     (tmp_path / "results.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     assert main(["bench", "--preset", "quick", "--out", str(tmp_path), "--report"]) == 0
     md = (tmp_path / "leaderboard.md").read_text()
@@ -509,13 +513,18 @@ def test_tables_leave_out_rows_of_jobs_the_preset_no_longer_has():
     from benchmark.grid import current_rows
 
     cfg = load_bench("quick")
-    current = [{**j.identity(), "lpips_net": cfg.lpips_net} for j in jobs(cfg)]     # scored as the preset scores
+    from scene_format.manifest import masks_digest
+
+    def scored(j):            # a row scored as the preset scores now (masks: "none" unless data/quick exists here)
+        return {**j.identity(), "lpips_net": cfg.lpips_net, "masks": masks_digest(j.data_dir)}
+
+    current = [scored(j) for j in jobs(cfg)]
     speed_row = next(r for r in current if r["study"] == "speed" and r["variant"] == "x26.2")
     old_speed = {**speed_row, "key": speed_row["key"].replace("x26.2", "x31.6"), "variant": "x31.6"}
     old_cap = {**current[0], "config_hash": "0" * 16}
     outside = {"key": "main/hinge/mine", "study": "main", "config_hash": "abc", "external": True}
-    extra_seed = [{**j.identity(), "lpips_net": cfg.lpips_net}
-                  for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=(7,)))) if j.study == "ablation"]
+    extra_seed = [scored(j) for j in jobs(replace(cfg, ablation=replace(cfg.ablation, seeds=(7,))))
+                  if j.study == "ablation"]
     kept, stale = current_rows(cfg, current + [old_speed, old_cap, outside] + extra_seed)
     assert stale == [old_speed, old_cap]
     order = {s: i for i, s in enumerate(cfg.scenes)}
