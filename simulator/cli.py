@@ -84,7 +84,7 @@ def add_simulate_parser(sub) -> None:
     p.add_argument("--t0", default="0", help="time of the first frame with --fps: us, or with a unit (10ms, -5ms, "
                                              "0.5s); may be negative (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
-    p.add_argument("--config", type=Path, help="sensor config: a YAML file or a shipped sensor's name (ideal, realistic: "
+    p.add_argument("--config", type=Path, help="sensor config: a YAML file or a shipped sensor's name (ideal, realistic, davis346: "
                                                "configs/sensors/); default: noise-free, C = 0.2")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
     p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
