@@ -26,8 +26,9 @@ def add_bench_parser(sub) -> None:
                    help="which studies to run: main, blur, ablation, speed (default main,blur,ablation; the speed "
                         "study runs only when named, as `make speed-study`)")
     p.add_argument("--seed-axes", type=name_list, default=None,
-                   help="what each of --seeds varies, comma-separated among train (training's random draws) and init "
-                        "(the initial points); default: the preset's seed_axes (train,init)")
+                   help="what each of --seeds varies, comma-separated among train (training's random draws), init "
+                        "(the initial points) and noise (the events: seed k trains on the dataset's k-th noise "
+                        "realisation, data/<dataset>@noise<k>); default: the preset's seed_axes (train,init)")
     p.add_argument("--ablation-seeds", default=None,
                    help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")
     p.add_argument("--seeds", type=int_in(1, 100, "training seeds per cell"), default=None,

@@ -98,8 +98,9 @@ class BenchConfig:
     # spread over them, and call differences within the spread ties
     seeds: int = 1
     # what a seed varies (`e4dgs bench --seed-axes`): `train` (train.seed: the order of views and
-    # windows, every random draw of training) and `init` (train.init.seed: the initial points); the
-    # leaderboard's note names them
+    # windows, every random draw of training), `init` (train.init.seed: the initial points) and
+    # `noise` (the dataset: seed k trains on data/<dataset>@noise<k>, the same scenes with the event
+    # sensor's noise and mismatch seeded by k, generated when missing); the leaderboard's note names them
     seed_axes: tuple[str, ...] = ("train", "init")
     # the seed spread (standard deviation over training seeds) of each cell's scores on one scene, as
     # measured (docs/results/benchmark.md): what the tables take as a one-seed cell's spread where results.jsonl
@@ -202,4 +203,5 @@ def dump(cfg: BenchConfig) -> dict:
 
 
 BenchConfig.BOUNDS = {"seeds": (1, 100, "training seeds per cell")}
-SEED_AXES = {"train": "train.seed", "init": "train.init.seed"}     # axis -> the config field a seed sets
+# axis -> the config field a seed sets (noise: none; the seed picks the dataset's noise realisation)
+SEED_AXES = {"train": "train.seed", "init": "train.init.seed", "noise": None}

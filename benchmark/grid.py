@@ -234,7 +234,13 @@ def seed_overrides(cfg: BenchConfig, seed: int) -> dict[str, int]:
     SEED_AXES); seed 0 sets none (the configs' defaults are 0)."""
     from benchmark.config import SEED_AXES
 
-    return {SEED_AXES[a]: seed for a in cfg.seed_axes} if seed else {}
+    return {SEED_AXES[a]: seed for a in cfg.seed_axes if SEED_AXES[a]} if seed else {}
+
+
+def seed_dataset(cfg: BenchConfig, seed: int) -> str:
+    """The dataset a main job of `seed` trains on: the preset's own ("") or, with the `noise` seed
+    axis, its noise realisation `<dataset>@noise<seed>` (datagen.config.load_preset)."""
+    return f"{cfg.dataset}@noise{seed}" if seed and "noise" in cfg.seed_axes else ""
 
 
 def _jobs(cfg: BenchConfig) -> list[Job]:
@@ -245,7 +251,7 @@ def _jobs(cfg: BenchConfig) -> list[Job]:
                 seeded = seed_overrides(cfg, seed)
                 out.append(Job("main", scene, name, "", c.method, c.config,
                                {**_at_speed(cfg, scene, name, cfg.cell_speed(name)), **seeded},
-                               seed=seed or None, speed=cfg.cell_speed(name)))
+                               seed=seed or None, speed=cfg.cell_speed(name), dataset=seed_dataset(cfg, seed)))
     b = cfg.blur
     if b.scene:
         from recon.methods import get_method

@@ -199,10 +199,12 @@ def spread_note(table, cells: list[str], scenes: list[str], labels: dict[str, st
     where, and which rows come from another version (†)."""
     out = io.StringIO()
     n = sorted({r.get("n_seeds", 1) for c in cells for r in table[c].values()})
-    varied = {"train": "training's random draws", "init": "the initial points"}
+    varied = {"train": "training's random draws", "init": "the initial points",
+              "noise": "the event sensor's noise realisation"}
     used = {a for c in cells for r in table[c].values() if r.get("n_seeds", 1) > 1 for a in r.get("seed_axes", ())}
     axes = [a for a in varied if a in used] + sorted(used - set(varied))
-    what = f" (a seed varies {' and '.join(varied.get(a, a) for a in axes)}; the dataset is one realisation)" if axes else ""
+    one = "" if "noise" in axes else "; the dataset is one realisation"
+    what = f" (a seed varies {' and '.join(varied.get(a, a) for a in axes)}{one})" if axes else ""
     out.write(f"\nSeeds per cell: {', '.join(map(str, n))}{what}; a cell with several shows mean ± sample standard deviation. "
               f"Bold / underline mark the best / second group: each of its values is better than every value below "
               f"it by Welch's t-test at {ALPHA:g} (two-sided; standard errors from the seeds' sd / sqrt(seeds) with "

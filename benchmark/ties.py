@@ -55,7 +55,9 @@ def combine_seeds(rows: list[dict]) -> dict:
                 spread[k] = sd
     from benchmark.config import SEED_AXES
 
-    axes = [a for a, f in SEED_AXES.items() if any(f in (r.get("overrides") or {}) for r in rows)]
+    axes = [a for a, f in SEED_AXES.items() if f and any(f in (r.get("overrides") or {}) for r in rows)]
+    if any("@noise" in str(r.get("dataset") or "") for r in rows):
+        axes.append("noise")
     out.update(seeds=[r.get("seed") or 0 for r in rows], n_seeds=len(rows), spread=spread, seed_axes=axes,
                older=next((r["older"] for r in rows if r.get("older")), None))
     return out

@@ -7,6 +7,8 @@ written to `<scene>/scene.yaml`.
 """
 from __future__ import annotations
 
+import re
+
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -76,7 +78,19 @@ def preset_file(preset: str | Path) -> Path:
     return path
 
 
+NOISE_REALISATION = re.compile(r"^(?P<base>.+)@noise(?P<k>\d+)$")
+
+
 def load_preset(preset: str | Path) -> PresetConfig:
+    """A dataset preset by name or file. `<preset>@noise<k>` is that preset's k-th noise realisation:
+    the same scenes with the event sensor's noise and mismatch seeded by k (`sensor_seed`), which the
+    benchmark's `noise` seed axis trains on (data/<preset>@noise<k>)."""
+    m = NOISE_REALISATION.match(str(preset)) if not Path(preset).is_file() else None
+    if m is not None:
+        from dataclasses import replace
+
+        base = load_preset(m["base"])
+        return replace(base, overrides={**base.overrides, "sensor_seed": int(m["k"])})
     path = preset_file(preset)
     data = read_yaml_mapping(path)        # its errors name the file already
     try:

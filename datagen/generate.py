@@ -219,13 +219,13 @@ class SceneJob:
         (this job's keys carry `prefix`)."""
         cfg = self.cfg
         C, W, H = cfg.camera.n_cameras, cfg.render.width, cfg.render.height
-        sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.seed * 1000 + k) for k in range(C)]
+        sims = [EventSimulator(cfg.sensor, W, H, seed=cfg.event_seed * 1000 + k) for k in range(C)]
         attrs = {**simulator_attrs(cfg.sensor), "scene": cfg.name}
         if cfg.speed != 1:
             attrs["speed"] = cfg.speed
         spools = []
         for k in range(C):
-            spools.append(EventSpool(self._event_path(k), W, H, attrs={**attrs, "camera": k, "seed": cfg.seed * 1000 + k},
+            spools.append(EventSpool(self._event_path(k), W, H, attrs={**attrs, "camera": k, "seed": cfg.event_seed * 1000 + k},
                                      resume_count=int(state[f"{prefix}n_events_{k}"]) if state else None))
             if state:
                 key0 = f"{prefix}sim{k}__"

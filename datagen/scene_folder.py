@@ -47,6 +47,8 @@ def config_fingerprint(cfg: SceneConfig, release: str | None = None) -> str:
     data.pop("formats")
     if not cfg.ground_truth:                        # off: folders generated before it keep their fingerprint
         data.pop("ground_truth")
+    if cfg.sensor_seed is None:                     # the scene's seed: folders generated before it keep theirs
+        data.pop("sensor_seed")
     if not cfg.blur.fit:
         data["blur"].pop("fit")
     if not cfg.render.adaptive_px:                  # every frame rendered: max_stride says nothing

@@ -260,6 +260,10 @@ class SceneConfig:
     formats: tuple[str, ...] = ()
     # per-pixel ground truth of every kept frame (datagen.ground_truth): any of GROUND_TRUTH_KINDS
     ground_truth: tuple[str, ...] = ()
+    # seed of the event sensor's noise and threshold mismatch alone (None: the scene's seed): another
+    # value is another realisation of the same scene's events, every frame and pose unchanged (the
+    # benchmark's `noise` seed axis: dataset `<preset>@noise<k>`)
+    sensor_seed: int | None = None
 
     def __post_init__(self):
         check_positive(self, "duration_s")
@@ -288,6 +292,11 @@ class SceneConfig:
             raise ConfigError(f"duration_s: {self.duration_s:g} s at render.fps {self.render.fps:g} is "
                               f"{self.duration_s * self.render.fps:.3g} rendered timestamps; at most {MAX_TIMESTAMPS:,} "
                               "(~2 days of rendering six cameras at the quick preset's pace); shorten the clip or lower the rate")
+
+    @property
+    def event_seed(self) -> int:
+        """The seed of the event sensor's noise and mismatch: sensor_seed, else the scene's seed."""
+        return self.seed if self.sensor_seed is None else self.sensor_seed
 
     @property
     def n_timestamps(self) -> int:
@@ -369,5 +378,5 @@ SourceConfig.BOUNDS = {"frame_start": (-1e7, 1e7, "frames"), "frame_end": (-1e7,
                        "fps": (1e-3, 1e6, "frames per second")}
 SceneConfig.BOUNDS = {
     "duration_s": (1e-6, 3600.0, "seconds of clip"), "motion_strength": (0.0, 100.0, "a multiple of the scene's motion"),
-    "seed": SEED_RANGE, "speed": (1.0, 1e4, "a time compression factor"),
+    "seed": SEED_RANGE, "sensor_seed": SEED_RANGE, "speed": (1.0, 1e4, "a time compression factor"),
 }
