@@ -1,6 +1,6 @@
 """Summarise the ground truth of generated scenes (prints a table) and draw one view of it:
 
-    python -m tools.ground_truth_summary data/quick_gt [--picture out.png --scene hinge --camera 0 --frame 5]
+    python -m tools.ground_truth_summary data/quick_gt [--picture out.png --scene hinge --camera 0 --frame 0]
 
 Per scene: the kinds, the seconds the ground truth took against the scene's other seconds, its bytes
 against the folder's, the brightness-constancy check (PSNR of a kept frame against the next one
@@ -11,6 +11,7 @@ the flow drawn as arrows, as the viewer and `e4dgs draw-events --flow` show them
 from __future__ import annotations
 
 import argparse
+import sys
 import json
 from pathlib import Path
 
@@ -82,16 +83,28 @@ def main(argv=None) -> int:
     ap.add_argument("root", type=existing_folder, help="a dataset root generated with ground_truth")
     ap.add_argument("--picture", type=Path, default=None, help="also draw one view (PNG)")
     ap.add_argument("--scene", default=None, help="with --picture: the scene folder's name")
-    ap.add_argument("--camera", type=nonnegative_int, default=0, help="with --picture (default 0)")
-    ap.add_argument("--frame", type=nonnegative_int, default=5,
-                    help="with --picture: a kept frame with a next one (default 5)")
+    ap.add_argument("--camera", type=nonnegative_int, help="with --picture (default 0)")
+    ap.add_argument("--frame", type=nonnegative_int, help="with --picture: a kept frame with a next one (default 0)")
+    ap.set_defaults(camera=None, frame=None)
     args = ap.parse_args(argv)
-    print("\n".join(table(args.root)))
+    if args.picture is None:
+        given = [f"--{k}" for k in ("scene", "camera", "frame") if getattr(args, k) is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)}: only with --picture (what to draw)")
+    rows = table(args.root)
+    if len(rows) == 2:
+        raise ValueError(f"{args.root}: no scene folder with ground truth (generate with `ground_truth: [depth, flow, "
+                         "normals, ids]` in the preset's overrides)")
+    print("\n".join(rows))
     if args.picture is not None:
-        scene = args.root / (args.scene or next(p.name for p in sorted(args.root.iterdir()) if (p / "manifest.json").exists()))
-        print(f"wrote {picture(scene, args.camera, args.frame, args.picture)}")
+        names = [p.name for p in sorted(args.root.iterdir()) if (p / "manifest.json").exists()]
+        name = args.scene or names[0]
+        if name not in names:
+            raise ValueError(f"--scene {name}: not a scene folder of {args.root} ({', '.join(names)})")
+        camera, frame = args.camera if args.camera is not None else 0, args.frame if args.frame is not None else 0
+        print(f"wrote {picture(args.root / name, camera, frame, args.picture)}")
     return 0
 
 
 if __name__ == "__main__":
-    run_tool(main)
+    sys.exit(run_tool(main))
