@@ -191,35 +191,64 @@ class SceneDataset:
         return {int(k): list(v) for k, v in gt.get("joined", {}).items()}
 
     def ground_truth(self, camera: int, index: int) -> GroundTruth:
-        """Kept frame `index` of `camera`'s ground truth as typed arrays (DatasetError when the scene
-        has none, or the frame is not one of its kept frames)."""
+        """Kept frame `index` of `camera`'s ground truth as typed arrays. DatasetError when the scene
+        has none, when the camera or frame is not an integer index of the scene's (bools and floats
+        are not indices), and when a file the scene's ground truth holds is missing or unreadable: a
+        missing file is an error naming it, never an absent map. Every kind the manifest lists is
+        read; a flow exists for every kept frame but the last, a velocity for every kept frame."""
         from common.imageio import read_exr
 
         kinds = self.ground_truth_kinds
         if not kinds:
             raise DatasetError(f"{self.dir}: no ground truth (generate it with `ground_truth: [depth, flow, normals, "
                                "ids]` in the scene's or the preset's config)")
+        n_kept = len(self.kept_times_us)
+        for what, value, count in (("camera", camera, self.n_cameras), ("kept frame", index, n_kept)):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+                    or not 0 <= int(value) < count:
+                raise DatasetError(f"{self.dir}: ground truth: {what} {value!r}: expected an integer 0 to {count - 1}")
+        camera, index = int(camera), int(index)
         root, name = self.dir / "ground_truth", f"cam{camera}/{index:05d}"
-        if not (camera in range(self.n_cameras) and any((root / k / f"cam{camera}").glob(f"{index:05d}.*") for k in kinds)):
-            raise DatasetError(f"{self.dir}: no ground truth for camera {camera}, kept frame {index}")
+        gt = self.manifest["ground_truth"]
+        source = self.dir.parent / gt["shared_with"] / "ground_truth" if gt.get("shared_with") else root
+
+        def need(path: Path) -> Path:
+            if not path.is_file():
+                raise DatasetError(f"{path}: missing (the scene's manifest lists {', '.join(kinds)} ground truth for "
+                                   f"camera {camera}, kept frame {index})")
+            return path
+
+        def exr(path: Path) -> np.ndarray:
+            try:
+                return read_exr(need(path))
+            except ValueError as exc:
+                raise DatasetError(str(exc)) from None
+
         out = {}
         if "depth" in kinds:
-            out["depth_m"] = read_exr(root / "depth" / f"{name}.exr")
+            out["depth_m"] = exr(root / "depth" / f"{name}.exr")
         if "normals" in kinds:
-            out["normals"] = read_exr(root / "normals" / f"{name}.exr")
+            out["normals"] = exr(root / "normals" / f"{name}.exr")
         if "ids" in kinds:
-            out["ids"] = cv2.imread(str(root / "ids" / f"{name}.png"), cv2.IMREAD_UNCHANGED)
+            path = need(root / "ids" / f"{name}.png")
+            ids = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if ids is None or ids.ndim != 2:
+                raise DatasetError(f"{path}: not a one-channel id image")
+            out["ids"] = ids
         if "flow" in kinds:
-            forward = root / "flow" / f"{name}.npz"
-            if forward.exists():                        # every kept frame but the last
-                with np.load(forward) as z:
-                    out.update(flow_px=z["forward_px"], flow_valid=z["valid"], flow_occluded=z["occluded"])
-            gt = self.manifest["ground_truth"]
-            source = self.dir.parent / gt["shared_with"] / "ground_truth" if gt.get("shared_with") else root
-            velocity = source / "velocity" / f"{name}.npz"
-            if velocity.exists():         # a speed variant's is its scene's, faster by its speed factor
+            if index < n_kept - 1:                      # every kept frame but the last
+                forward = need(root / "flow" / f"{name}.npz")
+                try:
+                    with np.load(forward) as z:
+                        out.update(flow_px=z["forward_px"], flow_valid=z["valid"], flow_occluded=z["occluded"])
+                except (OSError, ValueError, KeyError) as exc:
+                    raise DatasetError(f"{forward}: not a flow file ({exc})") from None
+            velocity = need(source / "velocity" / f"{name}.npz")      # a speed variant's is its scene's, scaled
+            try:
                 with np.load(velocity) as z:
                     out["velocity_px_per_ms"] = (z["px_per_ms"] * float(gt.get("velocity_scale", 1.0))).astype(np.float32)
+            except (OSError, ValueError, KeyError) as exc:
+                raise DatasetError(f"{velocity}: not a velocity file ({exc})") from None
         return GroundTruth(camera, index, int(self.kept_times_us[index]), **out)
 
     def pose(self, camera: int, t_us) -> np.ndarray:

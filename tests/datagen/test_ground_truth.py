@@ -356,3 +356,36 @@ def test_the_ground_truth_matches_blenders_own_cycles_passes_and_ray_casts(gt_sc
     assert tot["checked"] > 500 and tot["labelled_occluded"] > 0
     assert tot["disagree"] <= 0.01 * tot["checked"]
     assert tot["old_disagree"] > tot["disagree"]
+
+
+@pytest.mark.parametrize("kind, rel", [("ids", "ids/cam0/00001.png"), ("depth", "depth/cam0/00001.exr"),
+                                       ("normals", "normals/cam1/00001.exr"), ("flow", "flow/cam0/00001.npz"),
+                                       ("velocity", "velocity/cam0/00001.npz")])
+def test_a_missing_ground_truth_file_is_an_error_naming_it_never_an_absent_map(gt_scene, tmp_path, kind, rel):
+    import shutil
+
+    from scene_format.reader import DatasetError, SceneDataset
+
+    scene = Path(shutil.copytree(gt_scene, tmp_path / "cubes"))
+    (scene / "ground_truth" / rel).unlink()
+    camera = int(rel.split("/")[1][3:])
+    with pytest.raises(DatasetError, match=f"{rel}: missing"):
+        SceneDataset(scene).ground_truth(camera, 1)
+    SceneDataset(scene).ground_truth(1 - camera, 1)            # the other camera's files are all there
+
+
+@pytest.mark.parametrize("camera, index", [(-1, 0), (2, 0), (0, -1), (0, 10_000), (True, 0), (0, 1.0), ("0", 0)])
+def test_a_camera_or_frame_that_is_not_an_index_of_the_scene_is_a_dataset_error(gt_scene, camera, index):
+    from scene_format.reader import DatasetError, SceneDataset
+
+    with pytest.raises(DatasetError, match="ground truth: (camera|kept frame) .*: expected an integer 0 to"):
+        SceneDataset(gt_scene).ground_truth(camera, index)
+
+
+def test_the_last_kept_frame_has_no_flow_and_every_frame_a_velocity(gt_scene):
+    from scene_format.reader import SceneDataset
+
+    d = SceneDataset(gt_scene)
+    last = d.ground_truth(0, len(d.kept_times_us) - 1)
+    assert last.flow_px is None and last.velocity_px_per_ms is not None
+    assert d.ground_truth(0, 0).flow_px is not None
