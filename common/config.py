@@ -251,8 +251,9 @@ def expanded_size(data: Any, limit: int = MAX_YAML_VALUES) -> int:
 
 
 def read_yaml_mapping(path: Path) -> dict:
-    """The mapping at the top of a YAML file (empty file: {}); ConfigError naming the file otherwise,
-    a key given twice in one mapping included."""
+    """The mapping at the top of a YAML file; ConfigError naming the file otherwise: an empty file (or
+    one of comments only: a config that says nothing would silently mean every default, e.g. all
+    eight scenes at full size) and a key given twice in one mapping included."""
     try:
         text = path.read_text()
     except OSError as exc:
@@ -268,7 +269,8 @@ def read_yaml_mapping(path: Path) -> dict:
         raise ConfigError(f"{path}: its aliases (*name) expand to {n:,} values, more than any config holds "
                           f"({MAX_YAML_VALUES:,}): an alias bomb, or aliases nested too deep")
     if data is None:
-        return {}
+        raise ConfigError(f"{path}: empty config file (expected a mapping of settings; write `{{}}` for every "
+                          "default)")
     if not isinstance(data, Mapping):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
     return dict(data)

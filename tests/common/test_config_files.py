@@ -70,3 +70,19 @@ def test_an_old_command_line_config_name_prints_one_deprecation_line(tmp_path, c
                  "--config", str(REPO / "configs/sim_realistic.yaml")]) == 0
     err = capsys.readouterr().err
     assert err.count("warning: config") == 1 and "use 'realistic' (configs/sensors/realistic.yaml)" in err
+
+
+def test_an_empty_config_file_is_an_error_not_every_default(tmp_path, monkeypatch):
+    """An empty `datasets/empty.yaml` on the search path once started all eight scenes at full size."""
+    import pytest
+
+    from common.config import ConfigError
+    from datagen.config import load_preset
+
+    (tmp_path / "datasets").mkdir()
+    (tmp_path / "datasets" / "empty.yaml").write_text("# nothing yet\n")
+    monkeypatch.setenv("E4DGS_CONFIG_PATH", str(tmp_path))
+    with pytest.raises(ConfigError, match=r"empty.yaml: empty config file"):
+        load_preset("empty")
+    (tmp_path / "datasets" / "empty.yaml").write_text("{}\n")        # every default, said so
+    assert len(load_preset("empty").scenes) == 8
