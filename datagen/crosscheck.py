@@ -7,9 +7,13 @@ Rebuilds the scene from its scene.yaml and, at kept frames of chosen cameras:
   stored depth, normals and ids. Cycles' Depth pass is planar z-depth like ours; its Normal pass is
   the world shading normal. Cycles samples a random point inside each pixel, ours is the pixel
   centre: pixels within one pixel of an edge (of depth or id) are left out of the depth and normal
-  figures, and reported as a count. (Cycles' Vector pass is not compared: it is taken over one
-  Blender frame either side of the integer frame, 1/1000 of the clip, where the stored velocity is a
-  central difference over the neighbouring rendered timestamps at their own sub-frame times);
+  figures, and reported as a count;
+- renders Cycles' Vector pass at the integer Blender frame nearest each kept frame, the camera
+  keyframed either side, and compares it with the toolkit's tracking over the same step (the
+  machinery of the stored velocity and flow: surface points by ray cast, carried by their parts'
+  motion, projected). Cycles takes the pass over one Blender frame either side (the built-in scenes
+  span 1000 over the clip) where the stored velocity spans the neighbouring rendered timestamps, so
+  the stored map itself is not what is compared;
 - checks every flow label against exact visibility computed without the toolkit's tracer: each
   pixel's surface point found by Blender's scene ray cast, carried to frame j + 1 by its object's
   world matrix (rigid parts; a part whose mesh deforms is skipped and counted), and seen from frame
@@ -97,8 +101,10 @@ class Scene:
         self.R.set_pose(self.cams[camera], self.poses[camera, i])
         self.bpy.context.scene.camera = self.cams[camera]
 
-    def render_passes(self, camera: int, i: int, folder: Path) -> dict[str, np.ndarray]:
-        """Cycles' Depth, Normal and Object Index passes at rendered index i, 1 sample."""
+    def render_passes(self, camera: int, i: int, folder: Path, frame: int | None = None) -> dict[str, np.ndarray]:
+        """Cycles' Depth, Normal and Object Index passes at rendered index i, 1 sample; with `frame`
+        (an integer Blender frame), the Vector pass there instead, the camera keyframed at the frames
+        either side so that the pass sees its motion."""
         import addon_utils
 
         bpy, R = self.bpy, self.R
@@ -110,14 +116,37 @@ class Scene:
         sc.render.use_motion_blur = False
         vl = bpy.context.view_layer
         vl.use_pass_z = vl.use_pass_normal = vl.use_pass_object_index = True
+        vl.use_pass_vector = frame is not None
         sc.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
         sc.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
         sc.render.image_settings.color_depth = "32"
-        self.at(camera, i)
+        cam = self.cams[camera]
+        if frame is None:
+            self.at(camera, i)
+        else:
+            for f, pose in zip((frame - 1, frame, frame + 1), self.poses_at_frames(camera, frame)):
+                R.set_pose(cam, pose)
+                cam.keyframe_insert("location", frame=f)
+                cam.keyframe_insert("rotation_euler", frame=f)
+            sc.frame_set(frame)
+            sc.camera = cam
         sc.render.filepath = str(folder / "passes.exr")
-        with R._quiet_stdout():
-            bpy.ops.render.render(write_still=True)
+        try:
+            with R._quiet_stdout():
+                bpy.ops.render.render(write_still=True)
+        finally:
+            cam.animation_data_clear()
         return passes_of(folder / "passes.exr")
+
+    def taus_at_frames(self, frame: int) -> np.ndarray:
+        """Normalised times [3] of Blender frames frame - 1, frame, frame + 1."""
+        return (np.array([frame - 1, frame, frame + 1], np.float64) - self.R._TIME_MAP[0]) / self.R._TIME_MAP[1]
+
+    def poses_at_frames(self, camera: int, frame: int) -> np.ndarray:
+        """The camera's OpenCV c2w [3, 4, 4] at Blender frames frame - 1, frame, frame + 1."""
+        from datagen.rig import scene_poses
+
+        return scene_poses(self.cfg, self.taus_at_frames(frame))[camera]
 
     def ray(self, origin: np.ndarray, direction: np.ndarray, distance: float = 1.0e9):
         """Blender's own scene ray cast (the evaluated scene at the current time): (hit, location,
@@ -155,6 +184,38 @@ def check_passes(scene: Scene, camera: int, j: int, folder: Path) -> dict:
     ang = np.degrees(np.arccos(np.clip(cosang, -1, 1)))
     out["normal_median_deg"], out["normal_p95_deg"] = (float(np.median(ang)), float(np.percentile(ang, 95))) if ang.size else (0.0, 0.0)
     return out
+
+
+def check_vector(scene: Scene, camera: int, j: int, folder: Path) -> dict:
+    """Cycles' Vector pass against the toolkit's tracking (the machinery of the stored velocity and
+    flow: surface points by ray cast, carried by their parts' motion, projected) over the same step:
+    one Blender frame either side of the integer frame nearest kept frame j. Cycles' vectors in our
+    pixels per Blender frame: ((-X - Z) / 2, (Y + W) / 2) (previous - current in X, Y, current - next
+    in Z, W, y up)."""
+    from datagen import ground_truth as G
+    from datagen.render_geometry import SurfaceTracer
+
+    i = int(scene.kept[j])
+    frame = int(round(scene.R._TIME_MAP[0] + scene.R._TIME_MAP[1] * float(scene.tau[i])))
+    frame = min(max(frame, int(scene.R._TIME_MAP[0]) + 1), int(scene.R._TIME_MAP[0] + scene.R._TIME_MAP[1]) - 1)
+    p = scene.render_passes(camera, i, folder, frame=frame)
+    v = p["Vector"]
+    cycles = np.stack([(-v[..., 0] - v[..., 2]) / 2, (v[..., 1] + v[..., 3]) / 2], -1)
+    K, W, H = scene.intr.K, scene.cfg.render.width, scene.cfg.render.height
+    poses = scene.poses_at_frames(camera, frame)
+    tracer = SurfaceTracer(scene.taus_at_frames(frame))
+    s = tracer.views_at(1, {camera: poses[1]}, K, W, H)[camera]
+    uv, _z = G.track_uv(s, tracer.motion, poses, K, np.array([0, 2]))
+    ours = G.instant_flow(uv[0], uv[1], 2.0, s.hit, W, H)          # px per Blender frame
+    depth = G.depth_image(s, poses[1], W, H)
+    ids = G.id_image(s, W, H)
+    interior = (depth > 0) & ~_edges(depth, ids)
+    diff = np.linalg.norm(cycles - ours, axis=-1)[interior]
+    speed = np.linalg.norm(ours, axis=-1)[interior]
+    return {"camera": camera, "frame": j, "blender_frame": frame, "pixels": int(interior.sum()),
+            "vector_median_px": float(np.median(diff)) if diff.size else 0.0,
+            "vector_p95_px": float(np.percentile(diff, 95)) if diff.size else 0.0,
+            "speed_median_px": float(np.median(speed)) if speed.size else 0.0}
 
 
 def check_occlusion(scene: Scene, camera: int, j: int, stride: int = 1) -> dict:
@@ -254,12 +315,13 @@ def main(argv: list[str] | None = None) -> int:
     if bad or args.stride < 1:
         raise SystemExit(f"error: --frames 0..{n_kept - 2} and --cameras 0..{len(scene.cams) - 1}, --stride >= 1 "
                          f"(got {bad or args.stride})")
-    out = {"scene": str(args.scene), "passes": [], "occlusion": []}
+    out = {"scene": str(args.scene), "passes": [], "vector": [], "occlusion": []}
     with tempfile.TemporaryDirectory(prefix="e4dgs-crosscheck-") as tmp:
         for k in args.cameras:
             for j in frames:
                 if not args.no_passes:
                     out["passes"].append(check_passes(scene, k, j, Path(tmp)))
+                    out["vector"].append(check_vector(scene, k, j, Path(tmp)))
                 out["occlusion"].append(check_occlusion(scene, k, j, args.stride))
     print("| camera | frame | depth median / p95 (m) | normal median / p95 (deg) | ids agree off edges | "
           "pixels seen | near edges |")
@@ -268,6 +330,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {r['camera']} | {r['frame']} | {r['depth_median_m']:.1e} / {r['depth_p95_m']:.1e} | "
               f"{r['normal_median_deg']:.3f} / {r['normal_p95_deg']:.3f} | {r['ids_agree_off_edges']:.4f} | "
               f"{r['pixels_seen']} | {r['near_edges']} |")
+    if out["vector"]:
+        print("\nCycles' Vector pass against the tracking, one Blender frame either side (px per frame):")
+        print("| camera | frame | Blender frame | pixels | difference median / p95 | speed median |")
+        print("|---|---|---|---|---|---|")
+        for r in out["vector"]:
+            print(f"| {r['camera']} | {r['frame']} | {r['blender_frame']} | {r['pixels']} | {r['vector_median_px']:.2e} / "
+                  f"{r['vector_p95_px']:.2e} | {r['speed_median_px']:.3g} |")
     tot = {k: sum(r[k] for r in out["occlusion"]) for k in out["occlusion"][0] if k not in ("camera", "frame")}
     out["occlusion_total"] = tot
     print(f"\nocclusion labels against exact visibility ({tot['checked']} tracked points; {tot['deforming_skipped']} on "

@@ -338,7 +338,7 @@ def test_an_object_the_renderer_joined_names_the_parts_it_holds(tmp_path):
 
 def test_the_ground_truth_matches_blenders_own_cycles_passes_and_ray_casts(gt_scene, tmp_path):
     """A second implementation of every map, in Blender itself (datagen.crosscheck): Cycles' Depth,
-    Normal and Object Index passes at 1 sample, and each flow label against exact visibility by
+    Normal, Object Index and Vector passes at 1 sample, and each flow label against exact visibility by
     Blender's scene ray cast (the surface point carried by its object's matrix, seen from the next
     frame's camera). The depth-test rule the labels used before disagrees on edges; the stored
     labels may not (< 1 %)."""
@@ -352,6 +352,8 @@ def test_the_ground_truth_matches_blenders_own_cycles_passes_and_ray_casts(gt_sc
         assert p["pixels_seen"] > 100 and p["ids_agree_off_edges"] >= 0.999
         assert p["depth_median_m"] < 1e-4 and p["depth_p95_m"] < 1e-3          # single-precision BVH vs Cycles
         assert p["normal_median_deg"] < 0.05 and p["normal_p95_deg"] < 0.5
+    for v in doc["vector"]:        # Cycles' Vector pass and the tracking over one Blender frame either side
+        assert v["pixels"] > 100 and v["vector_median_px"] < 1e-4 and v["vector_p95_px"] < 0.01 * v["speed_median_px"] + 1e-4
     tot = doc["occlusion_total"]
     assert tot["checked"] > 500 and tot["labelled_occluded"] > 0
     assert tot["disagree"] <= 0.01 * tot["checked"]
