@@ -54,12 +54,14 @@ def false_calls(n_seeds: int, n_cells: int, trials: int, seed: int = 0) -> tuple
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, nargs="+", default=[3, 5])
-    p.add_argument("--trials", type=int, default=20000)
+    from tools.tool_cli import int_in
+
+    p = argparse.ArgumentParser(prog="python -m tools.tie_rule", description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int_in(2, 100, "seeds per cell"), nargs="+", default=[3, 5],
+                   help="seed counts to simulate (default 3 5)")
+    p.add_argument("--trials", type=int_in(1, 10_000_000, "simulated columns"), default=20000,
+                   help="simulated columns per setting (default 20000)")
     args = p.parse_args(argv)
-    if min(args.seeds) < 2 or args.trials < 1:
-        raise SystemExit("error: --seeds: at least 2 each; --trials: at least 1")
     print("| seeds | cells | old rule (2 SE): false calls | Welch t at 0.05, separable groups: false calls |")
     print("|---|---|---|---|")
     for n in args.seeds:
