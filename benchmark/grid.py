@@ -312,10 +312,12 @@ def current_rows(cfg: BenchConfig, rows: list[dict], data_root: Path | None = No
     kept, stale = [], []
     for r in rows:
         job = by_key.get(r.get("key"))
-        note = None if r.get("external") or job is None else older_note(r, job) or scoring_note(r, job, cfg)
+        note = None if r.get("external") or job is None else older_note(r, job) or (
+            None if r.get("status") == "failed" else scoring_note(r, job, cfg))      # a failed row has no scores
         if r.get("external") or (job is not None and note is None):
             kept.append(r)
-        elif note and reuse_older and note != "config" and not scoring_note(r, job, cfg):
+        elif note and reuse_older and note != "config" and (r.get("status") == "failed"
+                                                             or not scoring_note(r, job, cfg)):
             kept.append({**r, "older": note})
         else:
             stale.append(r)
