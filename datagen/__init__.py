@@ -1,2 +1,2 @@
-"""Dataset generator: the bpy render loop that feeds the event simulator (arrives with the dataset issue)."""
+"""Dataset generator: the bpy render loop that feeds the event simulator."""
 import common  # noqa: F401  (first: it sets the OpenMP wait policy before torch or numba loads)

@@ -2,7 +2,7 @@
 made from the same pixels over the same span; and the `davis346` sensor preset fitted on the first
 half of the span, reported on the second (held out).
 
-    python -m tools.aps_check [--clip tests/fixtures/real/davis346.aedat4] [--fit] [--json OUT]
+    python -m tools.aps_check --clip davis346.aedat4 [--fit] [--json OUT]
 
 Frames: linear intensity DN / 255 at each exposure's centre, APS noise removed (simulator.aps:
 each pixel's deviation from its temporal median soft-thresholded by 4 DN), upsampled linearly to
@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-CLIP = ROOT / "tests" / "fixtures" / "real" / "davis346.aedat4"
 RATE_HZ = 2000.0
 
 # v2e's command-line defaults and its `clean` / `noisy` presets (v2ecore/v2e_args.py), in our model's terms
@@ -141,11 +140,14 @@ def load_sensor(name: str):
 
 
 def main(argv: list[str] | None = None) -> int:
+    from tools.tool_cli import existing_file
     from simulator.aps import DN_FULL_SCALE, denoise_aps, static_pixels
     from simulator.config import SimulatorConfig
 
     p = argparse.ArgumentParser(prog="python -m tools.aps_check", description=__doc__.split("\n\n")[0])
-    p.add_argument("--clip", type=Path, default=CLIP, help="a DAVIS AEDAT4 clip with APS frames and events")
+    p.add_argument("--clip", type=existing_file, required=True,
+                   help="a DAVIS AEDAT4 recording with APS frames and events (e.g. the aedat 2.3.0 package's "
+                        "tests/data/test_data.aedat4, MIT)")
     p.add_argument("--fit", action="store_true", help="search the davis346 preset's values on the first half")
     p.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = p.parse_args(argv)
