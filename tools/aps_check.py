@@ -25,12 +25,10 @@ import itertools
 import json
 import math
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
 RATE_HZ = 2000.0
 
 # v2e's command-line defaults and its `clean` / `noisy` presets (v2ecore/v2e_args.py), in our model's terms
@@ -105,7 +103,6 @@ def objective(f: dict, real: dict) -> float:
 
 def fit(frames, t_us, real, static, log=print):
     """The sensor config that minimises `objective` on the first half (grid search), and its leak."""
-    from eventio.events import EventStream  # noqa: F401
     from simulator.aps import simulate_frames
     from simulator.config import SimulatorConfig
 

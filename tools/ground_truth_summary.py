@@ -85,7 +85,6 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", default=None, help="with --picture: the scene folder's name")
     ap.add_argument("--camera", type=nonnegative_int, help="with --picture (default 0)")
     ap.add_argument("--frame", type=nonnegative_int, help="with --picture: a kept frame with a next one (default 0)")
-    ap.set_defaults(camera=None, frame=None)
     args = ap.parse_args(argv)
     if args.picture is None:
         given = [f"--{k}" for k in ("scene", "camera", "frame") if getattr(args, k) is not None]

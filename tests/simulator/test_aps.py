@@ -3,7 +3,6 @@ temporal upsampling and the events of a pixel whose light doubles, by hand."""
 import math
 
 import numpy as np
-import pytest
 
 from simulator.aps import denoise_aps, simulate_frames, static_pixels, upsampled
 from simulator.config import SimulatorConfig
