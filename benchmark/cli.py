@@ -34,6 +34,10 @@ def add_bench_parser(sub) -> None:
     p.add_argument("--seeds", type=int_in(1, 100, "training seeds per cell"), default=None,
                    help="train every main cell at seeds 0 .. N-1 (default: the preset's seeds, 1): the tables give the "
                         "mean and standard deviation over seeds and call differences within the spread ties")
+    p.add_argument("--sensor", default=None, metavar="NAME",
+                   help="the event sensor of the main table's event cells: a sensor in configs/sensors/ (davis346, "
+                        "imx636, dvxplorer, ...); they train on data/<dataset>@<sensor> (generated when "
+                        "missing); default: each scene's own sensor. Results go to runs/<preset>@<sensor> unless --out")
     p.add_argument("--reuse-older", action="store_true",
                    help="keep rows made by another code version or dataset (the same resolved config) instead of "
                         "training them again; the tables mark each with the version it came from")
@@ -224,7 +228,16 @@ def run_bench_cli(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: --seed-axes: expected names among {', '.join(SEED_AXES)}, got "
                              f"{','.join(args.seed_axes)!r}")
         cfg = replace(cfg, seed_axes=tuple(dict.fromkeys(args.seed_axes)))
-    out = args.out or Path("runs") / name
+    if args.sensor:
+        from datagen.config import UNDER_SENSOR
+
+        if not UNDER_SENSOR.match(f"{cfg.dataset}@{args.sensor}"):
+            raise SystemExit(f"error: --sensor: expected the name of a sensor in configs/sensors/, got {args.sensor!r}")
+        try:
+            cfg = replace(cfg, sensor=args.sensor)
+        except ConfigError as exc:
+            raise SystemExit(f"error: --{exc}") from None
+    out = args.out or Path("runs") / (f"{name}@{cfg.sensor}" if cfg.sensor else name)
     data_root = args.data or Path("data") / cfg.dataset
     inside = output_inside_input(out, {"--data": data_root})
     if inside:

@@ -102,6 +102,10 @@ class BenchConfig:
     # `noise` (the dataset: seed k trains on data/<dataset>@noise<k>, the same scenes with the event
     # sensor's noise and mismatch seeded by k, generated when missing); the leaderboard's note names them
     seed_axes: tuple[str, ...] = ("train", "init")
+    # the event sensor of the main table's event cells (`e4dgs bench --sensor davis346`): "" keeps each
+    # scene's own; a name in configs/sensors/ trains them on data/<dataset>@<sensor> (the same scenes
+    # seen by that sensor, generated when missing); cells that see no events keep the dataset's frames
+    sensor: str = ""
     # the seed spread (standard deviation over training seeds) of each cell's scores on one scene, as
     # measured (docs/results/benchmark.md): what the tables take as a one-seed cell's spread where results.jsonl
     # holds no cell of its kind at two seeds or more: {cell: {psnr: dB, ssim: ..., lpips: ...}}
@@ -127,6 +131,13 @@ class BenchConfig:
                 c = getattr(self.speed, key)
                 if c not in self.cells:
                     raise ConfigError(f"speed.{key}: {c!r} is not a cell ({', '.join(self.cells)})")
+        if self.sensor:
+            from simulator.sensor_presets import read_sensor
+
+            try:
+                read_sensor(self.sensor)
+            except ConfigError as exc:
+                raise ConfigError(f"sensor: {exc}") from None
         for level, factor in self.speed_levels.items():
             if not factor >= 1:
                 raise ConfigError(f"speed_levels.{level}: expected a speed factor >= 1, got {factor!r}")

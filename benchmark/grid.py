@@ -237,10 +237,19 @@ def seed_overrides(cfg: BenchConfig, seed: int) -> dict[str, int]:
     return {SEED_AXES[a]: seed for a in cfg.seed_axes if SEED_AXES[a]} if seed else {}
 
 
-def seed_dataset(cfg: BenchConfig, seed: int) -> str:
-    """The dataset a main job of `seed` trains on: the preset's own ("") or, with the `noise` seed
-    axis, its noise realisation `<dataset>@noise<seed>` (datagen.config.load_preset)."""
-    return f"{cfg.dataset}@noise{seed}" if seed and "noise" in cfg.seed_axes else ""
+def seed_dataset(cfg: BenchConfig, seed: int, method: str | None = None) -> str:
+    """The dataset a main job of `seed` (and `method`) trains on: the preset's own (""), or, for a
+    method that sees events under the preset's `sensor`, `<dataset>@<sensor>`, and with the `noise`
+    seed axis the noise realisation `...@noise<seed>` (datagen.config.load_preset)."""
+    name = cfg.dataset
+    if cfg.sensor and method is not None:
+        from recon.methods import get_method
+
+        if "events" in get_method(method).inputs:
+            name += f"@{cfg.sensor}"
+    if seed and "noise" in cfg.seed_axes:
+        name += f"@noise{seed}"
+    return "" if name == cfg.dataset else name
 
 
 def _jobs(cfg: BenchConfig) -> list[Job]:
@@ -251,7 +260,8 @@ def _jobs(cfg: BenchConfig) -> list[Job]:
                 seeded = seed_overrides(cfg, seed)
                 out.append(Job("main", scene, name, "", c.method, c.config,
                                {**_at_speed(cfg, scene, name, cfg.cell_speed(name)), **seeded},
-                               seed=seed or None, speed=cfg.cell_speed(name), dataset=seed_dataset(cfg, seed)))
+                               seed=seed or None, speed=cfg.cell_speed(name),
+                               dataset=seed_dataset(cfg, seed, c.method)))
     b = cfg.blur
     if b.scene:
         from recon.methods import get_method

@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 
 from common.config import ConfigError, from_dict, read_yaml_mapping
-from scene_format.config import SceneConfig, deep_merge, parse_scene, read_scene_yaml
+from scene_format.config import SceneConfig, deep_merge, expand_sensor_preset, parse_scene, read_scene_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = ROOT / "blender_scenes"
@@ -79,18 +79,29 @@ def preset_file(preset: str | Path) -> Path:
 
 
 NOISE_REALISATION = re.compile(r"^(?P<base>.+)@noise(?P<k>\d+)$")
+UNDER_SENSOR = re.compile(r"^(?P<base>.+)@(?P<sensor>[A-Za-z][A-Za-z0-9_-]*)$")
 
 
 def load_preset(preset: str | Path) -> PresetConfig:
     """A dataset preset by name or file. `<preset>@noise<k>` is that preset's k-th noise realisation:
     the same scenes with the event sensor's noise and mismatch seeded by k (`sensor_seed`), which the
-    benchmark's `noise` seed axis trains on (data/<preset>@noise<k>)."""
+    benchmark's `noise` seed axis trains on (data/<preset>@noise<k>). `<preset>@<sensor>` is the same
+    scenes seen by the named sensor (configs/sensors/<sensor>.yaml, `sensor_preset`) in place of each
+    scene's own, with the effects each scene declares (`sensor_effects`); the two combine,
+    `quick@davis346@noise1`."""
+    from dataclasses import replace
+
     m = NOISE_REALISATION.match(str(preset)) if not Path(preset).is_file() else None
     if m is not None:
-        from dataclasses import replace
-
         base = load_preset(m["base"])
         return replace(base, overrides={**base.overrides, "sensor_seed": int(m["k"])})
+    m = UNDER_SENSOR.match(str(preset)) if not Path(preset).is_file() else None
+    if m is not None:
+        from simulator.sensor_presets import read_sensor
+
+        read_sensor(m["sensor"])                  # an unknown or broken sensor: its own error, now
+        base = load_preset(m["base"])
+        return replace(base, overrides={**base.overrides, "sensor_preset": m["sensor"]})
     path = preset_file(preset)
     data = read_yaml_mapping(path)        # its errors name the file already
     try:
@@ -111,7 +122,7 @@ def resolve_scene(name: str, overrides: Mapping[str, Any] | None = None,
                   scene_file: str | Path | None = None) -> SceneConfig:
     """Scene YAML (or `scene_file`) with `overrides` merged in, parsed strictly."""
     path = Path(scene_file) if scene_file else scene_yaml_path(name)
-    cfg = parse_scene(deep_merge(read_scene_yaml(path), overrides or {}), path)
+    cfg = parse_scene(expand_sensor_preset(deep_merge(read_scene_yaml(path), overrides or {}), path), path)
     if scene_file is None and cfg.name != name:
         raise ConfigError(f"{path}: name: expected {name!r}, got {cfg.name!r}")
     return cfg

@@ -165,9 +165,11 @@ class SceneJob:
         finally:
             bar.close()
             renderer.close()
-        for job, (_, job_spools, _), secs in zip(self.jobs, streams, seconds):
-            for spool in job_spools:
-                spool.finish(t_end_us=int(job.t_us[-1]))
+        for job, (job_sims, job_spools, _), secs in zip(self.jobs, streams, seconds):
+            for sim, spool in zip(job_sims, job_spools):
+                tail = sim.flush()              # what the readout still holds (latency, bandwidth)
+                spool.append(tail)
+                spool.finish(t_end_us=max(int(job.t_us[-1]), int(tail["t"][-1]) if tail.size else 0))
         if cfg.ground_truth:                        # after the loop: the frames it checks the flow against exist
             from datagen.ground_truth_files import write_ground_truth
 

@@ -49,6 +49,14 @@ def config_fingerprint(cfg: SceneConfig, release: str | None = None) -> str:
         data.pop("ground_truth")
     if cfg.sensor_seed is None:                     # the scene's seed: folders generated before it keep theirs
         data.pop("sensor_seed")
+    for key in ("sensor_preset", "sensor_effects"):  # the sensor itself is recorded resolved, below
+        if not data[key]:
+            data.pop(key)
+    from simulator.config import LATER_FIELDS
+
+    for key, off in LATER_FIELDS.items():           # sensor effects added later, at their off value
+        if data["sensor"].get(key) == off:
+            data["sensor"].pop(key)
     if not cfg.blur.fit:
         data["blur"].pop("fit")
     if not cfg.render.adaptive_px:                  # every frame rendered: max_stride says nothing

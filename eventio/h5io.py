@@ -341,6 +341,8 @@ def read_window(path: str | os.PathLike, t0_us: int, t1_us: int) -> EventStream:
 
 def simulator_attrs(config) -> dict[str, Any]:
     """Event-file attributes of a simulator config: every parameter as `sim_<name>`, plus the YAML."""
-    attrs = {f"sim_{k}": v for k, v in to_dict(config).items()}
+    later = getattr(config, "LATER_FIELDS", {})   # fields added later, left out while off (files keep their bytes)
+    attrs = {f"sim_{k}": v for k, v in to_dict(config).items()
+             if v is not None and not (k in later and v == later[k])}
     attrs["simulator_config"] = dump_config(config)
     return attrs

@@ -264,6 +264,11 @@ class SceneConfig:
     # value is another realisation of the same scene's events, every frame and pose unchanged (the
     # benchmark's `noise` seed axis: dataset `<preset>@noise<k>`)
     sensor_seed: int | None = None
+    # a named sensor (configs/sensors/<name>.yaml) in place of `sensor`, which it replaces whole, and the
+    # optional effects of it this scene calls for (simulator.sensor_presets.EFFECTS: latency, readout,
+    # bandwidth, on_off_mismatch); the dataset `<preset>@<sensor>` sets it for every scene
+    sensor_preset: str = ""
+    sensor_effects: tuple[str, ...] = ()
 
     def __post_init__(self):
         check_positive(self, "duration_s")
@@ -284,6 +289,11 @@ class SceneConfig:
             if kind not in GROUND_TRUTH_KINDS:
                 raise ConfigError(f"ground_truth: {kind!r} is not a kind of ground truth (expected any of "
                                   f"{', '.join(GROUND_TRUTH_KINDS)})")
+        from simulator.sensor_presets import EFFECTS
+
+        for effect in self.sensor_effects:
+            if effect not in EFFECTS:
+                raise ConfigError(f"sensor_effects: {effect!r} is not an effect (expected any of {', '.join(EFFECTS)})")
         if len(set(self.ground_truth)) != len(self.ground_truth):
             raise ConfigError(f"ground_truth: a kind is named twice ({list(self.ground_truth)})")
         if not self.motion_strength >= 0:   # 0: a static scene (only the cameras move)
@@ -333,6 +343,23 @@ def read_scene_yaml(path: Path) -> dict:
             raise ConfigError(f"{path}: file: given twice (as file: and as source.file:); keep one")
         data["source"] = {**source, "file": data.pop("file")}
     return data
+
+
+def expand_sensor_preset(data: Mapping, path: Path) -> dict:
+    """A scene mapping whose `sensor_preset` (if any) has replaced its `sensor` mapping: that named
+    sensor with the scene's `sensor_effects` on. Done once, when a scene is resolved from its YAML and
+    a preset's overrides; a folder's scene.yaml records the result and is read as written."""
+    if not data.get("sensor_preset"):
+        return dict(data)
+    from simulator.sensor_presets import sensor_dict
+
+    effects = data.get("sensor_effects") or ()
+    try:
+        if not isinstance(effects, (list, tuple)):
+            raise ConfigError(f"sensor_effects: expected a list of effect names, got {effects!r}")
+        return {**data, "sensor": sensor_dict(str(data["sensor_preset"]), effects)}
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: sensor_preset {data['sensor_preset']!r}: {exc}") from None
 
 
 def parse_scene(data: Mapping, path: Path) -> SceneConfig:

@@ -59,5 +59,5 @@ def simulate_frames(frames: np.ndarray, t_us: np.ndarray, config: SimulatorConfi
     upsampled to rate_hz; times on the frames' clock."""
     F, H, W = frames.shape
     sim = EventSimulator(config, W, H, seed=seed)
-    chunks = [sim.push(frame, t) for frame, t in upsampled(frames, t_us, rate_hz)]
+    chunks = [sim.push(frame, t) for frame, t in upsampled(frames, t_us, rate_hz)] + [sim.flush()]
     return EventStream(np.concatenate(chunks), W, H)

@@ -47,6 +47,21 @@ class SimulatorConfig:
     hot_pixel_fraction: float = 0.0
     hot_pixel_rate_hz: float = 0.0
 
+    # ON and OFF threshold mismatch apart (log units): None takes threshold_sigma (one sigma for both).
+    pos_threshold_sigma: float | None = None
+    neg_threshold_sigma: float | None = None
+    # Readout (simulator.readout), after the pixels: each event reaches the output latency_us later,
+    # plus a jitter drawn from Normal(0, latency_jitter_us) truncated at +-3 sigma (never before the
+    # crossing); a semi-synchronous readout reports timestamps in steps of readout_period_us (rounded up);
+    # a bandwidth limit serves at most max_event_rate_hz events per second in arrival order (a FIFO):
+    # an event waits for the ones before it, and is dropped when its wait would exceed max_readout_delay_us
+    # (0: never dropped). 0 = off for each.
+    latency_us: float = 0.0
+    latency_jitter_us: float = 0.0
+    readout_period_us: int = 0
+    max_event_rate_hz: float = 0.0
+    max_readout_delay_us: int = 0
+
     def __post_init__(self):
         def need(ok: bool, field: str, what: str):
             if not ok:
@@ -71,17 +86,40 @@ class SimulatorConfig:
             need(getattr(self, name) <= MAX_RATE_HZ, name, f"at most {MAX_RATE_HZ:g} events per second per pixel "
                  "(the sensor's bandwidth; more would only fill memory)")
         need(isinstance(self.refractory_us, int) and self.refractory_us >= 0, "refractory_us", "a non-negative integer")
+        for name in ("pos_threshold_sigma", "neg_threshold_sigma"):
+            need(getattr(self, name) is None or (finite(getattr(self, name)) and getattr(self, name) >= 0), name,
+                 "a non-negative number, or null (threshold_sigma)")
+        for name in ("latency_us", "latency_jitter_us", "max_event_rate_hz"):
+            need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
+        for name in ("readout_period_us", "max_readout_delay_us"):
+            need(isinstance(getattr(self, name), int) and getattr(self, name) >= 0, name, "a non-negative integer")
         need(finite(self.hot_pixel_fraction) and 0 <= self.hot_pixel_fraction <= 1, "hot_pixel_fraction", "a number in [0, 1]")
-        if self.threshold_sigma > 0.5 * min(self.pos_threshold, self.neg_threshold):
-            warnings.warn(f"threshold_sigma: {self.threshold_sigma} is more than half the contrast threshold "
+        if max(self.sigma_pos, self.sigma_neg) > 0.5 * min(self.pos_threshold, self.neg_threshold):
+            warnings.warn(f"threshold_sigma: {max(self.sigma_pos, self.sigma_neg)} is more than half the contrast threshold "
                           f"({min(self.pos_threshold, self.neg_threshold)}): many pixels' thresholds are clamped to "
                           f"threshold_min ({self.threshold_min}) and fire far more events (v2e's default sigma is "
                           "0.03)", ConfigWarning, stacklevel=3)
 
     # Which optional stages run.
     @property
+    def sigma_pos(self) -> float:
+        """The ON thresholds' per-pixel spread (log units)."""
+        return self.threshold_sigma if self.pos_threshold_sigma is None else self.pos_threshold_sigma
+
+    @property
+    def sigma_neg(self) -> float:
+        """The OFF thresholds' per-pixel spread (log units)."""
+        return self.threshold_sigma if self.neg_threshold_sigma is None else self.neg_threshold_sigma
+
+    @property
     def has_mismatch(self) -> bool:
-        return self.threshold_sigma > 0
+        return self.sigma_pos > 0 or self.sigma_neg > 0
+
+    @property
+    def has_readout(self) -> bool:
+        """Whether events pass a readout stage (latency, jitter, semi-synchronous steps, bandwidth)."""
+        return bool(self.latency_us > 0 or self.latency_jitter_us > 0 or self.readout_period_us > 0
+                    or self.max_event_rate_hz > 0)
 
     @property
     def has_lowpass(self) -> bool:
@@ -115,4 +153,13 @@ SimulatorConfig.BOUNDS = {
     "leak_rate_hz": (0.0, 1e6, "events per second a pixel"), "leak_rate_sigma_decades": (0.0, 10.0, "decades"),
     "shot_noise_rate_hz": (0.0, 1e6, "events per second a pixel"), "hot_pixel_fraction": (0.0, 1.0, "a fraction of the pixels"),
     "hot_pixel_rate_hz": (0.0, 1e6, "events per second a pixel"),
+    "pos_threshold_sigma": (0.0, 10.0, "log intensity"), "neg_threshold_sigma": (0.0, 10.0, "log intensity"),
+    "latency_us": (0.0, 1e6, "microseconds"), "latency_jitter_us": (0.0, 1e6, "microseconds"),
+    "readout_period_us": (0, 10 ** 6, "microseconds"), "max_event_rate_hz": (0.0, 1e10, "events per second (the sensor)"),
+    "max_readout_delay_us": (0, 10 ** 9, "microseconds"),
 }
+
+# Fields added after datasets were first written: left out of a scene's fingerprint at these values
+# (off), so folders generated before them keep their identity (datagen.scene_folder.config_fingerprint).
+LATER_FIELDS = {"pos_threshold_sigma": None, "neg_threshold_sigma": None, "latency_us": 0.0, "latency_jitter_us": 0.0,
+                "readout_period_us": 0, "max_event_rate_hz": 0.0, "max_readout_delay_us": 0}

@@ -90,7 +90,9 @@ def simulate_files(files: list[Path], t_us: list[int], out: Path, config: Simula
                 if (k + 1) % checkpoint_every == 0 and k + 1 < len(files):
                     ckpt.save({**sim.state_dict(), "next_frame": k + 1, "n_events": spool.sync()})
                     checkpointed = True
-            spool.finish(t_end_us=t_us[-1])
+            tail = sim.flush()                  # what the readout still holds (latency, bandwidth)
+            spool.append(tail)
+            spool.finish(t_end_us=max(int(t_us[-1]), int(tail["t"][-1]) if tail.size else 0))
             ckpt.remove()
             done = True
         finally:

@@ -8,7 +8,9 @@ previous frame as an `EVENT_DTYPE` array. The first frame only initialises the p
 Stages, each run only when the config enables it: log response -> photoreceptor low-pass -> leak
 (drift of the reference, applied as a rising offset on the input so the interval stays linear) ->
 shot noise and hot pixels (random events) -> threshold crossings with per-pixel mismatch,
-refractory period and exact per-crossing timestamps (`kernels.emit_events`).
+refractory period and exact per-crossing timestamps (`kernels.emit_events`) -> the readout
+(latency and jitter, semi-synchronous timestamps, bandwidth limit; `readout.Readout`), which may hold
+events past the interval's end: `flush()` releases them after the last frame.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from eventio.events import EventStream, empty_events
 from simulator.kernel_ref import emit_events_ref
 from simulator.kernels import Workspace, emit_events
 from simulator.noise import NO_NOISE, draw_noise_events
+from simulator.readout import Readout
 
 _NEVER_US = np.iinfo(np.int64).min // 4  # "no event yet" for the refractory clock
 BACKENDS = {"fast": emit_events, "ref": emit_events_ref}
@@ -56,12 +59,12 @@ class EventSimulator:
         self._emit_kwargs = {"workspace": Workspace(threads)} if backend == "fast" else {}
         P = self.n_pixels = self.width * self.height
         # Independent streams: fixed-pattern parameters, then temporal noise.
-        fixed_rng, self._noise_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+        fixed_rng, self._noise_rng, readout_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
         c = config
         # thresholds: [P] with mismatch, [1] (shared by all pixels) without
         n_c = P if c.has_mismatch else 1
-        self.c_pos = pixel.sample_thresholds(fixed_rng, c.pos_threshold, c.threshold_sigma, c.threshold_min, n_c)
-        self.c_neg = pixel.sample_thresholds(fixed_rng, c.neg_threshold, c.threshold_sigma, c.threshold_min, n_c)
+        self.c_pos = pixel.sample_thresholds(fixed_rng, c.pos_threshold, c.sigma_pos, c.threshold_min, n_c)
+        self.c_neg = pixel.sample_thresholds(fixed_rng, c.neg_threshold, c.sigma_neg, c.threshold_min, n_c)
         self._leak_rates_hz = None
         self._leak_phase = None
         if c.has_leak:
@@ -81,6 +84,8 @@ class EventSimulator:
             self._level_bufs = [np.empty(P), np.empty(P)]
             self._scratch = np.empty(P)
         self._lp = self._leak_offset = None
+        # latency, jitter, semi-synchronous steps, bandwidth: after the pixels (simulator.readout)
+        self.readout = Readout(config, readout_rng, backend) if config.has_readout else None
 
     # -- input checks -----------------------------------------------------------------------
     def _prepare(self, frame, t_us) -> tuple[np.ndarray, int]:
@@ -161,7 +166,12 @@ class EventSimulator:
         self._level = level
         self.t_prev_us = t_us
         self.n_frames += 1
-        return events
+        return events if self.readout is None else self.readout.push(events, t_us)
+
+    def flush(self) -> np.ndarray:
+        """The events still inside the readout at the end of the recording (none without a readout
+        stage): call once after the last `push`."""
+        return empty_events() if self.readout is None else self.readout.flush()
 
     def _init_state(self, log_now: np.ndarray) -> None:
         c = self.config
@@ -192,6 +202,8 @@ class EventSimulator:
                 value = getattr(self, name)
                 if value is not None:
                     state[name] = value.copy()
+            if self.readout is not None:
+                state.update(self.readout.state())
         return state
 
     def load_state_dict(self, state: Mapping) -> None:
@@ -206,6 +218,8 @@ class EventSimulator:
         self._noise_rng.bit_generator.state = json.loads(str(state["noise_rng"]))
         for name in self._STATE_ARRAYS:
             setattr(self, name, np.array(state[name]) if name in state else None)
+        if self.readout is not None and "readout_pending" in state:
+            self.readout.load_state(state)
 
 
 def simulate(frames: Iterable[np.ndarray], t_us: Sequence[int], config: SimulatorConfig | None = None,
@@ -225,6 +239,7 @@ def simulate(frames: Iterable[np.ndarray], t_us: Sequence[int], config: Simulato
         chunks.append(sim.push(frame, t_us[n]))
     if sim is None:
         raise FrameError("simulate: no frames given")
+    chunks.append(sim.flush())
     if n + 1 != len(t_us):
         raise FrameError(f"simulate: {n + 1} frames but {len(t_us)} timestamps")
     return EventStream(np.concatenate(chunks), sim.width, sim.height)
