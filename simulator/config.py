@@ -47,6 +47,13 @@ class SimulatorConfig:
     hot_pixel_fraction: float = 0.0
     hot_pixel_rate_hz: float = 0.0
 
+    # Shot noise's share of ON events (v2e: half), its scale at white against the dark (v2e: 0.25: noise
+    # depends on the light, more in dark pixels), and the per-pixel spread of its rate (log-normal,
+    # decades; a fixed pattern, as the leak's).
+    shot_noise_on_fraction: float = 0.5
+    shot_noise_white_factor: float = 0.25
+    shot_noise_sigma_decades: float = 0.0
+
     # ON and OFF threshold mismatch apart (log units): None takes threshold_sigma (one sigma for both).
     pos_threshold_sigma: float | None = None
     neg_threshold_sigma: float | None = None
@@ -89,7 +96,10 @@ class SimulatorConfig:
         for name in ("pos_threshold_sigma", "neg_threshold_sigma"):
             need(getattr(self, name) is None or (finite(getattr(self, name)) and getattr(self, name) >= 0), name,
                  "a non-negative number, or null (threshold_sigma)")
-        for name in ("latency_us", "latency_jitter_us", "max_event_rate_hz"):
+        need(finite(self.shot_noise_on_fraction) and 0 <= self.shot_noise_on_fraction <= 1, "shot_noise_on_fraction",
+             "a number in [0, 1]")
+        for name in ("latency_us", "latency_jitter_us", "max_event_rate_hz", "shot_noise_white_factor",
+                     "shot_noise_sigma_decades"):
             need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
         for name in ("readout_period_us", "max_readout_delay_us"):
             need(isinstance(getattr(self, name), int) and getattr(self, name) >= 0, name, "a non-negative integer")
@@ -153,6 +163,8 @@ SimulatorConfig.BOUNDS = {
     "leak_rate_hz": (0.0, 1e6, "events per second a pixel"), "leak_rate_sigma_decades": (0.0, 10.0, "decades"),
     "shot_noise_rate_hz": (0.0, 1e6, "events per second a pixel"), "hot_pixel_fraction": (0.0, 1.0, "a fraction of the pixels"),
     "hot_pixel_rate_hz": (0.0, 1e6, "events per second a pixel"),
+    "shot_noise_on_fraction": (0.0, 1.0, "a fraction of the shot-noise events"),
+    "shot_noise_white_factor": (0.0, 100.0, "a multiple of the dark rate"), "shot_noise_sigma_decades": (0.0, 10.0, "decades"),
     "pos_threshold_sigma": (0.0, 10.0, "log intensity"), "neg_threshold_sigma": (0.0, 10.0, "log intensity"),
     "latency_us": (0.0, 1e6, "microseconds"), "latency_jitter_us": (0.0, 1e6, "microseconds"),
     "readout_period_us": (0, 10 ** 6, "microseconds"), "max_event_rate_hz": (0.0, 1e10, "events per second (the sensor)"),
@@ -161,5 +173,6 @@ SimulatorConfig.BOUNDS = {
 
 # Fields added after datasets were first written: left out of a scene's fingerprint at these values
 # (off), so folders generated before them keep their identity (datagen.scene_folder.config_fingerprint).
-LATER_FIELDS = {"pos_threshold_sigma": None, "neg_threshold_sigma": None, "latency_us": 0.0, "latency_jitter_us": 0.0,
+LATER_FIELDS = {"shot_noise_on_fraction": 0.5, "shot_noise_white_factor": 0.25, "shot_noise_sigma_decades": 0.0,
+                "pos_threshold_sigma": None, "neg_threshold_sigma": None, "latency_us": 0.0, "latency_jitter_us": 0.0,
                 "readout_period_us": 0, "max_event_rate_hz": 0.0, "max_readout_delay_us": 0}

@@ -115,11 +115,13 @@ def sample_thresholds(rng: np.random.Generator, nominal: float, sigma: float, mi
 
 
 def shot_noise_rates_hz(inten01: np.ndarray, total_rate_hz: float, c_nominal: float,
-                        c_pixel: np.ndarray) -> np.ndarray:
+                        c_pixel: np.ndarray, share: float = 0.5,
+                        white_factor: float = SHOT_NOISE_WHITE_FACTOR) -> np.ndarray:
     """Per-pixel, per-polarity shot-noise rate [P] as in v2e.
 
-    Half the total rate per polarity, scaled from 1 in the dark to SHOT_NOISE_WHITE_FACTOR at white,
-    and by nominal / actual threshold (pixels with smaller thresholds are noisier).
+    `share` of the total rate for this polarity (v2e: half), scaled from 1 in the dark to
+    `white_factor` at white (v2e: SHOT_NOISE_WHITE_FACTOR), and by nominal / actual threshold (pixels
+    with smaller thresholds are noisier).
     """
     w = np.clip(inten01, 0.0, 1.0)
-    return (0.5 * total_rate_hz) * ((SHOT_NOISE_WHITE_FACTOR - 1.0) * w + 1.0) * (c_nominal / c_pixel)
+    return (share * total_rate_hz) * ((white_factor - 1.0) * w + 1.0) * (c_nominal / c_pixel)

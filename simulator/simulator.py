@@ -76,6 +76,9 @@ class EventSimulator:
         if c.has_hot_pixels:
             n_hot = int(round(c.hot_pixel_fraction * P))
             self.hot_pixels = np.sort(fixed_rng.choice(P, size=n_hot, replace=False)).astype(np.int64)
+        self._shot_gain = None          # per-pixel shot-noise rate factor (fixed pattern), drawn last
+        if c.has_shot_noise and c.shot_noise_sigma_decades > 0:
+            self._shot_gain = 10.0 ** fixed_rng.normal(0.0, c.shot_noise_sigma_decades, P)
         self.t_prev_us: int | None = None
         self.n_frames = 0
         self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
@@ -160,7 +163,8 @@ class EventSimulator:
         if not c.is_noise_free:
             noise = draw_noise_events(self._noise_rng, self.t_prev_us, t_us, self.n_pixels, frame,
                                       c.shot_noise_rate_hz, (c.pos_threshold, c.neg_threshold),
-                                      self.c_pos, self.c_neg, self.hot_pixels, c.hot_pixel_rate_hz)
+                                      self.c_pos, self.c_neg, self.hot_pixels, c.hot_pixel_rate_hz,
+                                      c.shot_noise_on_fraction, c.shot_noise_white_factor, self._shot_gain)
         events = self._emit(self._level, level, self._base, self._t_ready, self.c_pos, self.c_neg,
                             self.t_prev_us, t_us, c.refractory_us, *noise, self.width, **self._emit_kwargs)
         self._level = level

@@ -124,3 +124,36 @@ def test_lowpass_step_in_place_equals_the_formula(rng):
     np.testing.assert_allclose(buf, expected, rtol=1e-12, atol=1e-12)
     # a huge step saturates the update weight at 1: the filter jumps straight to the input
     np.testing.assert_allclose(lowpass_step(lp, new, inten + 1e9, 1e-4, 300.0), new)
+
+
+def _still(cfg, level, seconds=2.0, w=100, h=100, seed=0):
+    from simulator import simulate
+
+    f = np.full((h, w), level, np.float32)
+    n = int(seconds * 100)
+    return simulate([f] * (n + 1), [10_000 * k for k in range(n + 1)], cfg, seed=seed).events
+
+
+def test_shot_noise_share_light_and_spread():
+    """The shot-noise ON share, its light dependence and its per-pixel spread, against their analytic
+    values on a still scene (Poisson counts: tolerances of a few standard errors)."""
+    from simulator import SimulatorConfig
+
+    base = dict(pos_threshold=0.2, neg_threshold=0.2, shot_noise_rate_hz=5.0)
+    reference = len(_still(SimulatorConfig(**base), 0.0))
+    nominal = 5.0 * 2.0 * 100 * 100                                    # the configured rate at w = 0
+    w_dark = float(intensity01(np.zeros(1))[0])                        # black maps to w slightly above 0
+    assert reference / nominal == pytest.approx(1 - 0.75 * w_dark, abs=0.02)
+    dark = _still(SimulatorConfig(**base, shot_noise_on_fraction=0.2), 0.0)
+    assert abs(len(dark) - reference) < 5 * np.sqrt(reference)          # the same total, another split
+    assert np.mean(dark["p"] > 0) == pytest.approx(0.2, abs=0.01)
+    white = _still(SimulatorConfig(**base, shot_noise_white_factor=0.6), 1.0)
+    v2e_white = _still(SimulatorConfig(**base), 1.0)                     # v2e's 0.25 at white
+    assert len(white) / nominal == pytest.approx(0.6, abs=0.02)
+    assert len(v2e_white) / nominal == pytest.approx(SHOT_NOISE_WHITE_FACTOR, abs=0.01)
+    spread = _still(SimulatorConfig(**base, shot_noise_sigma_decades=0.5), 0.0, seconds=4.0)
+    counts = np.bincount(spread["y"].astype(int) * 100 + spread["x"].astype(int), minlength=10_000)
+    m = counts.mean()
+    sigma = np.sqrt(np.log1p((counts.var() - m) / m ** 2)) / np.log(10)
+    assert sigma == pytest.approx(0.5, abs=0.05)
+    assert m / (2 * reference / 10_000) == pytest.approx(np.exp((0.5 * np.log(10)) ** 2 / 2), rel=0.08)  # log-normal mean

@@ -1,0 +1,227 @@
+"""The static-background check: a sensor's noise (leak, shot noise, hot pixels), its refractory floor and
+its readout's timestamp steps, fitted on the still pixels of a real recording's first half and
+reported on its second half (held out), for a camera without frames to feed the simulator (the
+`imx636` and `dvxplorer` presets).
+
+    python -m tools.noise_check --clip imx636.raw [--fit] [--intensity 0.5] [--json OUT]
+
+Still pixels: pixels none of whose events, over the whole recording, has an event at a neighbour
+(3x3) within 5 ms before it (eventio.realism.isolated_events): a moving edge fires neighbours
+together, noise does not. Every event there is noise. On a half, per still pixel: its events (rate
+in Hz), their ON fraction, the same-pixel intervals, hot pixels (eventio.realism's rule).
+
+Fit (first half): hot pixels are the still pixels the realism rule calls hot (fraction, and their
+median rate); the rest's noise, mean rate r per pixel with ON fraction f, is leak (ON only, regular)
+for its ON excess, leak = max(0, 2f - 1) r', and shot noise (Poisson) for the rest, with ON share
+min(f, 1/2); its light dependence is not measured (a still clip has one light level: white factor 1);
+the per-pixel spread of the noise rate (decades, leak and shot noise alike) from the counts' excess
+variance over Poisson, var = m + m^2 (exp((s ln 10)^2) - 1), which sets the rates' median
+r' = r / exp((s ln 10)^2 / 2) (the configured rates; their mean is r); the refractory period is the p0.1 of the
+same-pixel intervals of every non-hot pixel (moving edges reach it); the readout period, the most
+common step between distinct timestamps when more than half of the timestamps share it (a
+semi-synchronous readout; else none).
+
+Report (second half): a still scene (one grey level, `--intensity`, linear) simulated for the
+half's duration at the clip's resolution by each sensor, against the camera's still pixels:
+the noise rate, its ON fraction, hot-pixel fraction, the interval floor and the Wasserstein-1
+distances of log10 per-pixel rate (pixels with an event) and log10 interval. Thresholds are not
+measured here (no frames: a still scene's noise does not depend on them but through shot noise's
+threshold scaling).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+FRAME_RATE_HZ = 200.0           # the still scene's frames (only noise and leak happen between them)
+
+
+def still_pixels(stream) -> np.ndarray:
+    """bool [H, W]: pixels whose every event is isolated (module note); pixels with no event included."""
+    from eventio.realism import isolated_events
+
+    e = stream.events
+    iso = isolated_events(stream)
+    pix = e["y"].astype(np.int64) * stream.width + e["x"].astype(np.int64)
+    moving = np.zeros(stream.width * stream.height, bool)
+    moving[pix[~iso]] = True
+    return ~moving.reshape(stream.height, stream.width)
+
+
+def window(stream, t0: int, t1: int):
+    from eventio.events import EventStream
+
+    e = stream.events
+    return EventStream(e[(e["t"] >= t0) & (e["t"] < t1)], stream.width, stream.height)
+
+
+def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
+    """Noise statistics of the events on `mask`'s pixels over `duration_s` (module note)."""
+    from eventio.realism import HOT_FACTOR, HOT_MIN_EVENTS
+
+    e = stream.events
+    inside = mask[e["y"].astype(np.int64), e["x"].astype(np.int64)]
+    e = e[inside]
+    W = stream.width
+    pix = e["y"].astype(np.int64) * W + e["x"].astype(np.int64)
+    counts = np.bincount(pix, minlength=mask.size)[mask.reshape(-1)]
+    active = counts[counts > 0]
+    rates = active / duration_s
+    p99 = float(np.percentile(rates, 99)) if len(rates) else 0.0
+    hot_sel = (counts >= HOT_MIN_EVENTS) & (counts / duration_s > HOT_FACTOR * p99)
+    order = np.lexsort((e["t"], pix))
+    ps, ts = pix[order], e["t"][order].astype(np.int64)
+    same = ps[1:] == ps[:-1]
+    hot_pix = np.flatnonzero(mask.reshape(-1))[hot_sel]
+    not_hot = ~np.isin(ps[1:], hot_pix)
+    iei = np.diff(ts)[same]
+    iei_cold = np.diff(ts)[same & not_hot]
+    cold_counts = counts[~hot_sel]
+    m = cold_counts.mean() if len(cold_counts) else 0.0
+    excess = cold_counts.var() - m if len(cold_counts) else 0.0
+    spread = math.sqrt(math.log1p(excess / m ** 2)) / math.log(10) if m > 0 and excess > 0 else 0.0
+    cold_events = e[~np.isin(pix, hot_pix)]
+    return {"pixels": int(mask.sum()), "events": int(len(e)), "rate_hz": len(e) / mask.sum() / duration_s,
+            "cold_rate_hz": len(cold_events) / max(len(cold_counts), 1) / duration_s,
+            "cold_on_fraction": float(np.mean(cold_events["p"] > 0)) if len(cold_events) else float("nan"),
+            "on_fraction": float(np.mean(e["p"] > 0)) if len(e) else float("nan"),
+            "hot_fraction": float(hot_sel.sum()) / mask.sum(), "hot_rate_hz": float(np.median(counts[hot_sel]) / duration_s)
+            if hot_sel.any() else 0.0, "rate_spread_decades": spread,
+            "iei_p0_1_us": float(np.percentile(iei_cold, 0.1)) if len(iei_cold) else float("nan"),
+            "iei_p1_us": float(np.percentile(iei, 1)) if len(iei) else float("nan"),
+            "log_rates": np.log10(rates), "log_iei": np.log10(np.maximum(iei, 1)).astype(float)}
+
+
+def readout_period_us(stream) -> int:
+    """The most common step between distinct timestamps when over half of them share it, else 0."""
+    t = np.unique(stream.events["t"])
+    steps = np.diff(t)
+    if len(steps) < 10:
+        return 0
+    values, counts = np.unique(steps, return_counts=True)
+    k = int(np.argmax(counts))
+    return int(values[k]) if counts[k] > 0.5 * len(steps) and values[k] > 1 else 0
+
+
+def refractory_floor_us(stream, hot_pixels: np.ndarray) -> int:
+    """p0.1 of the same-pixel intervals of every pixel but the hot ones (moving edges included: they
+    are what reaches the refractory period)."""
+    from eventio.realism import pixel_order
+
+    pix, order = pixel_order(stream)
+    p, t = pix[order], stream.events["t"][order].astype(np.int64)
+    keep = (p[1:] == p[:-1]) & ~np.isin(p[1:], hot_pixels)
+    iei = np.diff(t)[keep]
+    return int(round(float(np.percentile(iei, 0.1)))) if len(iei) else 0
+
+
+def fit(real_half, mask, duration_s: float, clip_stream) -> dict:
+    """A preset's noise, refractory and readout values from the first half (module note)."""
+    from eventio.realism import HOT_FACTOR, HOT_MIN_EVENTS
+
+    f = noise_figures(real_half, mask, duration_s)
+    on, r = f["cold_on_fraction"], f["cold_rate_hz"]
+    on = on if math.isfinite(on) else 0.5
+    spread = f["rate_spread_decades"]
+    median = r / math.exp((spread * math.log(10)) ** 2 / 2)   # the log-normal's median, whose mean is r
+    leak = max(0.0, 2 * on - 1) * median                       # ON beyond half: leak (ON only, regular)
+    shot = median - leak
+    e = real_half.events
+    counts = np.bincount(e["y"].astype(np.int64) * real_half.width + e["x"].astype(np.int64),
+                         minlength=mask.size) * mask.reshape(-1)
+    active = counts[counts > 0] / duration_s
+    p99 = float(np.percentile(active, 99)) if len(active) else 0.0
+    hot = np.flatnonzero((counts >= HOT_MIN_EVENTS) & (counts / duration_s > HOT_FACTOR * p99))
+    return {"leak_rate_hz": round(leak, 5), "shot_noise_rate_hz": round(shot, 5),
+            "shot_noise_on_fraction": round(min(on, 0.5), 3), "shot_noise_white_factor": 1.0,
+            "shot_noise_sigma_decades": round(f["rate_spread_decades"], 3),
+            "leak_rate_sigma_decades": round(f["rate_spread_decades"], 3),
+            "hot_pixel_fraction": round(f["hot_fraction"], 6), "hot_pixel_rate_hz": round(f["hot_rate_hz"], 3),
+            "refractory_us": refractory_floor_us(real_half, hot),
+            "readout_period_us": readout_period_us(clip_stream)}
+
+
+def still_scene(config, width: int, height: int, duration_s: float, intensity: float, seed: int = 0):
+    """The events `config`'s sensor makes of a still scene at one linear grey level."""
+    from eventio.events import EventStream
+    from simulator.simulator import EventSimulator
+
+    sim = EventSimulator(config, width, height, seed=seed)
+    frame = np.full((height, width), intensity, np.float32)
+    n = int(math.ceil(duration_s * FRAME_RATE_HZ))
+    chunks = [sim.push(frame, int(round(k * 1e6 / FRAME_RATE_HZ))) for k in range(n + 1)] + [sim.flush()]
+    return EventStream(np.concatenate(chunks), width, height)
+
+
+def compare(sim: dict, real: dict) -> dict:
+    from scipy.stats import wasserstein_distance
+
+    w1 = lambda a, b: float(wasserstein_distance(a, b)) if len(a) and len(b) else float("nan")  # noqa: E731
+    return {"w1_log_rate": w1(sim["log_rates"], real["log_rates"]), "w1_log_iei": w1(sim["log_iei"], real["log_iei"])}
+
+
+def main(argv: list[str] | None = None) -> int:
+    from dataclasses import replace
+
+    from eventio.formats import read_recording
+    from simulator.config import SimulatorConfig
+    from simulator.sensor_presets import load_sensor
+    from tools.aps_check import V2E
+    from tools.tool_cli import existing_file, float_in
+
+    p = argparse.ArgumentParser(prog="python -m tools.noise_check", description=__doc__.split("\n\n")[0])
+    p.add_argument("--clip", type=existing_file, required=True, help="an event recording (any format `e4dgs import` reads)")
+    p.add_argument("--sensor", default=None, help="a shipped sensor to report beside ideal, realistic and v2e's presets")
+    p.add_argument("--fit", action="store_true", help="print the values fitted on the first half")
+    p.add_argument("--intensity", type=float_in(0.0, 1.0, "linear intensity"), default=0.5,
+                   help="the still scene's linear grey level (default 0.5)")
+    p.add_argument("--json", type=Path, default=None, help="write the figures here")
+    args = p.parse_args(argv)
+    stream, fmt = read_recording(args.clip)
+    e = stream.events
+    t0, t1 = int(e["t"].min()), int(e["t"].max())
+    mid = (t0 + t1) // 2
+    mask = still_pixels(stream)
+    halves = {"fit": window(stream, t0, mid), "held_out": window(stream, mid, t1)}
+    dur = {"fit": (mid - t0) / 1e6, "held_out": (t1 - mid) / 1e6}
+    real = {h: noise_figures(s, mask, dur[h]) for h, s in halves.items()}
+    out = {"clip": str(args.clip), "format": fmt, "width": stream.width, "height": stream.height,
+           "still_pixels": int(mask.sum()), "real": {h: {k: v for k, v in f.items() if not k.startswith("log_")}
+                                                    for h, f in real.items()}}
+    fitted = fit(halves["fit"], mask, dur["fit"], stream)
+    out["fitted"] = fitted
+    configs = {"ideal": load_sensor("ideal"), "realistic": load_sensor("realistic")}
+    configs.update({k: SimulatorConfig(**v) for k, v in V2E.items()})
+    if args.fit:
+        configs["fitted"] = replace(SimulatorConfig(), **fitted)
+    if args.sensor:
+        configs[args.sensor] = load_sensor(args.sensor, ("readout",) if fitted["readout_period_us"] else ())
+    print(f"{args.clip} ({fmt}, {stream.width}x{stream.height}, {len(e):,} events, {(t1 - t0) / 1e6:.2f} s): "
+          f"{int(mask.sum()):,} still pixels ({mask.mean():.1%}); fitted on the first half: {fitted}\n")
+    held = real["held_out"]
+    print("| sensor (held-out half) | noise (Hz / still pixel) | ON | hot pixels | IEI p0.1 (us) | W1 log rate | W1 log IEI |")
+    print("|---|---|---|---|---|---|---|")
+    print(f"| the camera | {held['rate_hz']:.4f} | {held['on_fraction']:.3f} | {held['hot_fraction']:.5f} | "
+          f"{held['iei_p0_1_us']:.0f} | 0 | 0 |")
+    out["configs"] = {}
+    for name, cfg in configs.items():
+        sim = still_scene(cfg, stream.width, stream.height, dur["held_out"], args.intensity)
+        f = noise_figures(sim, np.ones_like(mask), dur["held_out"])
+        d = compare(f, held)
+        out["configs"][name] = {**{k: v for k, v in f.items() if not k.startswith("log_")}, **d}
+        print(f"| {name} | {f['rate_hz']:.4f} | {f['on_fraction']:.3f} | {f['hot_fraction']:.5f} | "
+              f"{f['iei_p0_1_us']:.0f} | {d['w1_log_rate']:.3f} | {d['w1_log_iei']:.3f} |")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+    return 0
+
+
+if __name__ == "__main__":
+    from tools.tool_cli import run_tool
+
+    sys.exit(run_tool(main))
