@@ -39,6 +39,14 @@ class FrameError(ValueError):
 MAX_PIXELS = 4096 * 4096       # the per-pixel state of ~30 arrays stays within a few GB
 
 
+def _config_key(config: SimulatorConfig) -> dict:
+    """A config as a checkpoint records it: fields added later are left out at their off value, so a
+    run checkpointed before they existed resumes with the same sensor."""
+    from simulator.config import LATER_FIELDS
+
+    return {k: v for k, v in to_dict(config).items() if not (k in LATER_FIELDS and v == LATER_FIELDS[k])}
+
+
 class EventSimulator:
     """Per-pixel state of one DVS sensor; see module docstring for the model."""
 
@@ -198,7 +206,7 @@ class EventSimulator:
         regenerated from the seed, and `load_state_dict` checks that seed, size and config match.
         """
         state = {"width": self.width, "height": self.height, "seed": self.seed,
-                 "config": json.dumps(to_dict(self.config), sort_keys=True), "n_frames": self.n_frames,
+                 "config": json.dumps(_config_key(self.config), sort_keys=True), "n_frames": self.n_frames,
                  "t_prev_us": 0 if self.t_prev_us is None else self.t_prev_us,
                  "noise_rng": json.dumps(self._noise_rng.bit_generator.state)}
         if self.t_prev_us is not None:

@@ -134,3 +134,23 @@ def test_off_means_the_same_stream():
     sim = EventSimulator(cfg, W, H, seed=7)
     expected = np.maximum(np.random.default_rng(np.random.SeedSequence(7).spawn(2)[0]).normal(0.2, 0.03, W * H), 0.01)
     assert np.array_equal(sim.c_pos, expected)
+
+
+def test_checkpoint_from_before_the_later_fields_resumes():
+    """A checkpoint written before the readout and shot-noise fields existed (its config without them)
+    is the same sensor when they are off: it resumes; a changed field still refuses."""
+    import json
+
+    from simulator.config import LATER_FIELDS
+
+    f, t = frames()
+    cfg = SimulatorConfig(threshold_sigma=0.03)
+    sim = EventSimulator(cfg, W, H, seed=1)
+    for i in range(5):
+        sim.push(f[i], t[i])
+    state = sim.state_dict()
+    old = json.loads(state["config"])
+    assert not set(old) & set(LATER_FIELDS)                 # written as before those fields existed
+    EventSimulator(cfg, W, H, seed=1).load_state_dict(state)
+    with pytest.raises(ValueError, match="config"):
+        EventSimulator(SimulatorConfig(threshold_sigma=0.03, latency_us=5.0), W, H, seed=1).load_state_dict(state)
