@@ -211,7 +211,30 @@ class SceneJob:
                   f"{self.cfg.name} over from the first timestamp", flush=True)
             ckpt.remove()
             state = {}
+        if state:
+            problem = self._sensor_state_problem(state)
+            if problem:
+                print(f"warning: {ckpt.path}: {problem}; starting {self.cfg.name} over from the first timestamp",
+                      flush=True)
+                ckpt.remove()
+                state = {}
         return state
+
+    def _sensor_state_problem(self, state: dict) -> str | None:
+        """Why the checkpoint's event sensors cannot continue here (another sensor config or seed,
+        e.g. a checkpoint of an older release), or None."""
+        cfg = self.cfg
+        W, H = cfg.render.width, cfg.render.height
+        for job in self.jobs:
+            key0 = f"{job._prefix()}sim"
+            for k in range(cfg.camera.n_cameras):
+                prefix = f"{key0}{k}__"
+                try:
+                    EventSimulator(job.cfg.sensor, W, H, seed=job.cfg.event_seed * 1000 + k).load_state_dict(
+                        {key[len(prefix):]: v for key, v in state.items() if key.startswith(prefix)})
+                except (ValueError, KeyError) as exc:
+                    return f"camera {k} of {job.dir.name}: {exc}"
+        return None
 
     def _event_path(self, camera: int) -> Path:
         return self.dir / "events" / f"cam{camera}.h5"

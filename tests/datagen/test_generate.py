@@ -267,6 +267,26 @@ def test_a_checkpoint_whose_spool_is_lost_starts_over(tmp_path):
     assert not list((tmp_path / "b").rglob(".*.spool")) and not list((tmp_path / "b").rglob(".*.lock"))
 
 
+def test_a_checkpoint_of_another_sensor_starts_over(tmp_path):
+    """A checkpoint whose event sensors another config wrote (an older release's) is not resumed with
+    a mismatched sensor, nor is it an error: the scene starts over, saying why, to the same files."""
+    preset = tmp_path / "p.yaml"
+    preset.write_text(RESUME_PRESET)
+    assert generate(tmp_path / "a", preset=str(preset)).returncode == 0
+    ckpt = _killed_after_first_checkpoint(preset, tmp_path / "b")
+    assert ckpt.exists()
+    with np.load(ckpt, allow_pickle=False) as z:
+        state = {k: z[k] for k in z.files}
+    config = json.loads(str(state["sim0__config"]))
+    state["sim0__config"] = np.array(json.dumps({**config, "refractory_us": 41}, sort_keys=True))
+    with open(ckpt, "wb") as fh:
+        np.savez(fh, **state)
+    r = generate(tmp_path / "b", preset=str(preset))
+    assert r.returncode == 0 and "starting cubes over" in r.stdout and "resuming" not in r.stdout, r.stdout + r.stderr
+    assert "camera 0 of cubes" in r.stdout
+    assert _same_files(tmp_path / "a", tmp_path / "b") == []
+
+
 def test_bad_config_or_scene_fails_clearly_and_writes_nothing(tmp_path):
     r = generate(tmp_path / "out", scene="kitchen")
     assert r.returncode == 2 and "unknown scene 'kitchen'" in r.stderr
