@@ -5,7 +5,7 @@ import argparse
 import re
 from pathlib import Path
 
-from common.argtypes import add_main_input, positive_float, positive_int, seed_int
+from common.argtypes import add_main_input, name_list, positive_float, positive_int, seed_int
 
 IMAGE_SUFFIXES = {".exr", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}
 
@@ -84,8 +84,11 @@ def add_simulate_parser(sub) -> None:
     p.add_argument("--t0", default="0", help="time of the first frame with --fps: us, or with a unit (10ms, -5ms, "
                                              "0.5s); may be negative (default 0)")
     p.add_argument("--out", type=Path, required=True, help="output event file (.h5)")
-    p.add_argument("--config", type=Path, help="sensor config: a YAML file or a shipped sensor's name (ideal, realistic, davis346: "
-                                               "configs/sensors/); default: noise-free, C = 0.2")
+    p.add_argument("--config", type=Path, help="sensor config: a YAML file or a shipped sensor's name (ideal, realistic, davis346, "
+                                               "imx636, dvxplorer: configs/sensors/); default: noise-free, C = 0.2")
+    p.add_argument("--effects", type=name_list, default=[], metavar="NAMES",
+                   help="comma-separated optional effects of the --config sensor to switch on, with the values it "
+                        "supplies: latency, readout, bandwidth, on_off_mismatch (default: none)")
     p.add_argument("--seed", type=seed_int, default=0, help="seed of the sensor's noise and threshold mismatch (default 0)")
     p.add_argument("--checkpoint-every", type=positive_int, default=500, metavar="N",
                    help="save a resumable checkpoint every N frames (default 500)")
@@ -122,25 +125,16 @@ def check_output(out: Path, frames: Path) -> None:
             break
 
 
-def sensor_file(config: Path) -> Path:
-    """--config as a file: the path given, or a shipped sensor's name (common.config_files)."""
-    from common.config import ConfigError
-    from common.config_files import find, shipped_names
-
-    found = find("sensors", config)
-    if found is None:
-        raise ConfigError(f"{config}: cannot read config file (no such file, nor a shipped sensor of that name; "
-                          f"shipped: {', '.join(shipped_names('sensors'))})")
-    return found
-
-
 def run_simulate(args: argparse.Namespace) -> int:
-    from common.config import ConfigError, load_config
+    from common.config import ConfigError
     from simulator.config import SimulatorConfig
     from simulator.files import simulate_files
+    from simulator.sensor_presets import load_sensor
 
     try:
-        config = load_config(SimulatorConfig, sensor_file(args.config)) if args.config else SimulatorConfig()
+        if args.effects and not args.config:
+            raise ConfigError("--effects: needs --config (the sensor that supplies the effects' values)")
+        config = load_sensor(args.config, args.effects) if args.config else SimulatorConfig()
     except ConfigError as exc:
         raise SystemExit(f"error: {exc}") from None
     check_output(args.out, args.frames)

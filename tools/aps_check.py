@@ -127,16 +127,8 @@ def fit(frames, t_us, real, static, log=print):
     return best[1], leak, target
 
 
-def load_sensor(name: str):
-    """A shipped sensor config by name (configs/sensors/<name>.yaml)."""
-    from common.config import load_config
-    from simulator.cli import sensor_file
-    from simulator.config import SimulatorConfig
-
-    return load_config(SimulatorConfig, sensor_file(Path(name)))
-
-
 def main(argv: list[str] | None = None) -> int:
+    from simulator.sensor_presets import load_sensor
     from tools.tool_cli import existing_file
     from simulator.aps import DN_FULL_SCALE, denoise_aps, static_pixels
     from simulator.config import SimulatorConfig

@@ -97,15 +97,23 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
             "log_rates": np.log10(rates), "log_iei": np.log10(np.maximum(iei, 1)).astype(float)}
 
 
-def readout_period_us(stream) -> int:
-    """The most common step between distinct timestamps when over half of them share it, else 0."""
-    t = np.unique(stream.events["t"])
-    steps = np.diff(t)
-    if len(steps) < 10:
+def readout_period_us(stream, max_period_us: float = 1000.0) -> int:
+    """A semi-synchronous readout's period: among P from 20 us to max_period_us (0.1 us steps), the
+    largest of those of which the same-pixel intervals under 2.5 ms are closest to whole multiples
+    (the mean resultant length of their phases iei / P mod 1 within 0.005 of the best; a divisor P / k
+    fits as well, so the largest); 0 when the best is under 0.9 (an asynchronous readout)."""
+    from eventio.realism import inter_event_intervals
+
+    iei, _ = inter_event_intervals(stream)
+    iei = iei[(iei > 0) & (iei < 2500)].astype(np.float64)
+    if len(iei) < 100:
         return 0
-    values, counts = np.unique(steps, return_counts=True)
-    k = int(np.argmax(counts))
-    return int(values[k]) if counts[k] > 0.5 * len(steps) and values[k] > 1 else 0
+    iei = np.random.default_rng(0).choice(iei, size=min(len(iei), 5000), replace=False)
+    periods = np.arange(20.0, max_period_us, 0.1)
+    fit = np.array([abs(np.mean(np.exp(2j * np.pi * iei / period))) for period in periods])
+    if fit.max() < 0.9:
+        return 0
+    return int(round(periods[np.flatnonzero(fit >= fit.max() - 0.005)[-1]]))
 
 
 def refractory_floor_us(stream, hot_pixels: np.ndarray) -> int:
