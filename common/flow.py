@@ -46,12 +46,26 @@ def read_flow(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         try:
             with np.load(path) as z:
                 if "forward_px" in z.files:
-                    return z["forward_px"].astype(np.float64), z["valid"].astype(bool)
-                v = z["px_per_ms"].astype(np.float64)
-                return v, np.any(v != 0, -1)
+                    flow, valid = z["forward_px"].astype(np.float64), z["valid"].astype(bool)
+                else:
+                    flow = z["px_per_ms"].astype(np.float64)
+                    valid = np.any(flow != 0, -1)
+            if flow.ndim != 3 or flow.shape[2] != 2 or valid.shape != flow.shape[:2]:
+                raise ValueError(f"arrays of shape {flow.shape} and {valid.shape}, expected [H, W, 2] and [H, W]")
+            if not np.isfinite(flow[valid]).all():
+                raise ValueError("non-finite flow at valid pixels")
+            return flow, valid
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a ground-truth flow file ({exc})") from None
-    png = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such flow file")
+    if path.suffix.lower() != ".png":
+        raise ValueError(f"{path}: expected a DSEC-Flow 16-bit PNG or a ground-truth .npz flow file, got a "
+                         f"{path.suffix or 'suffix-less'} file")
+    try:
+        png = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    except cv2.error as exc:
+        raise ValueError(f"{path}: cannot be read as a PNG ({str(exc).strip().splitlines()[-1]})") from None
     if png is None or png.dtype != np.uint16 or png.ndim != 3 or png.shape[2] != 3:
         raise ValueError(f"{path}: expected a DSEC-Flow 16-bit PNG with 3 channels (x, y, valid)")
     return decode_dsec_flow(png[..., ::-1])           # OpenCV reads BGR; the file's channels are x, y, valid

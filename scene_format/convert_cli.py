@@ -38,6 +38,8 @@ def run_export(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {src}: no such event file or scene folder")
     if args.out.resolve() == src.resolve():
         raise SystemExit(f"error: --out {args.out}: is the source itself")
+    if src.is_file():
+        check_export_name(args.out, args.format)
     t0 = time.perf_counter()
     try:
         if src.is_dir():
@@ -49,6 +51,23 @@ def run_export(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {exc}") from None
     print(f"{args.out}: {args.format}, {len(written)} file(s) in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def check_export_name(out: Path, fmt: str) -> None:
+    """SystemExit unless `out` names a file of `fmt` (its suffix; a ROS2 bag is a folder), not a folder."""
+    from eventio.formats import SUFFIX
+
+    want = SUFFIX[fmt]
+    if fmt == "rosbag2":
+        known = {s for s in SUFFIX.values() if s}
+        if out.suffix.lower() in known:
+            raise SystemExit(f"error: --out {out}: a ROS2 bag is a folder; give a name without the {out.suffix} suffix")
+        return
+    if out.is_dir():
+        raise SystemExit(f"error: --out {out}: is a folder; --format {fmt} writes one file (e.g. {out / ('events' + want)})")
+    if out.suffix.lower() != want:
+        raise SystemExit(f"error: --out {out}: --format {fmt} writes a {want} file; name it {out.with_suffix(want).name} "
+                         f"(a reader finds the format from the contents, but other tools go by the name)")
 
 
 def add_import_parser(sub) -> None:

@@ -210,6 +210,8 @@ def run_view(args: argparse.Namespace) -> int:
     from common.imageio import write_png
     from eventio.event_file import EventFile
     from eventio.h5io import EventFileError
+    import numpy as np
+
     from simulator.event_pictures import annotate, event_frame, overlay_flow, parse_time_us, save_video, window_starts
 
     try:
@@ -238,9 +240,10 @@ def run_view(args: argparse.Namespace) -> int:
         def draw(stream, a: int, b: int):
             frame = event_frame(stream)
             if flow is not None:
-                frame = overlay_flow(frame, *flow, scale=scale)
-                return frame if args.plain else annotate(frame, a, b)
-            return frame if args.plain else annotate(frame, a, b, scale)
+                frame = overlay_flow(frame, *flow, scale=scale)     # scaled by the overlay
+            elif scale > 1:
+                frame = np.repeat(np.repeat(frame, scale, 0), scale, 1)
+            return frame if args.plain else annotate(frame, a, b)
         t0 = parse_time_us(args.t0) if args.t0 is not None else start
         t1 = parse_time_us(args.t1) if args.t1 is not None else end
         if t1 <= t0:

@@ -66,7 +66,8 @@ FLOW_RGB = (0, 140, 0)      # arrows of a drawn flow: dark green, apart from ON 
 
 def overlay_flow(frame: np.ndarray, flow: np.ndarray, valid: np.ndarray, scale: int = 1, step_px: int = 8) -> np.ndarray:
     """The event frame scaled up `scale` times (nearest), with a flow [H, W, 2] (px, at the sensor's
-    resolution) drawn as arrows from every step_px-th valid pixel centre to where it goes."""
+    resolution) drawn as arrows from every step_px-th valid pixel centre to where it goes (non-finite
+    flow skipped)."""
     import cv2
 
     if flow.shape[:2] != frame.shape[:2]:
@@ -75,9 +76,11 @@ def overlay_flow(frame: np.ndarray, flow: np.ndarray, valid: np.ndarray, scale: 
     h, w = flow.shape[:2]
     for y in range(step_px // 2, h, step_px):
         for x in range(step_px // 2, w, step_px):
-            if valid[y, x]:
+            if valid[y, x] and np.isfinite(flow[y, x]).all():
                 a = ((x + 0.5) * scale, (y + 0.5) * scale)
-                b = ((x + 0.5 + flow[y, x, 0]) * scale, (y + 0.5 + flow[y, x, 1]) * scale)
+                # an arrow leaving the picture is drawn to just past its edge (a huge flow stays drawable)
+                b = (np.clip((x + 0.5 + flow[y, x, 0]) * scale, -w * scale, 2 * w * scale),
+                     np.clip((y + 0.5 + flow[y, x, 1]) * scale, -h * scale, 2 * h * scale))
                 cv2.arrowedLine(img, tuple(int(round(v)) for v in a), tuple(int(round(v)) for v in b), FLOW_RGB, 1,
                                 cv2.LINE_AA, tipLength=0.3)
     return img

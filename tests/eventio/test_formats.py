@@ -204,8 +204,8 @@ def test_bad_recordings_get_one_line_and_leave_nothing(tmp_path):
     write_events(tmp_path / "neg.h5", negative, t_offset_us=-5)
     for fmt in ("evt3", "evt2", "rosbag"):
         with pytest.raises(SystemExit, match="negative"):
-            main(["export", str(tmp_path / "neg.h5"), "--format", fmt, "--out", str(tmp_path / f"neg.{fmt}")])
-        assert not (tmp_path / f"neg.{fmt}").exists()
+            main(["export", str(tmp_path / "neg.h5"), "--format", fmt, "--out", str(tmp_path / f"neg{formats.SUFFIX[fmt]}")])
+        assert not (tmp_path / f"neg{formats.SUFFIX[fmt]}").exists()
     big = EventStream(make_events([0], [3000], [1], [1]), 4000, 10)
     with pytest.raises(FormatError, match="at most 2048"):
         vendor_formats.write_raw(tmp_path / "big.raw", big, "evt3")
@@ -221,3 +221,18 @@ def test_header_parsing():
     with pytest.raises(evt_codec.EvtFormatError, match="not a text line ending in a line break"):
         evt_codec.parse_raw_header(b"% evt 3.0")
     assert struct.calcsize("<I") == 4
+
+
+@pytest.mark.parametrize("fmt", [f for f in formats.FORMATS if f != "rosbag2"])
+def test_export_refuses_a_name_of_another_format_or_a_folder(fmt, tmp_path):
+    """EVT 3.0 bytes under an .h5 name, or a file export into a folder, are refused before writing."""
+    src = tmp_path / "src.h5"
+    write_events(src, EventStream(make_events([1, 3], [1, 2], [1, 2], [1, -1]), 10, 10))
+    wrong = ".h5" if fmt != "h5" else ".raw"
+    with pytest.raises(SystemExit, match=f"--format {fmt} writes a \\{formats.SUFFIX[fmt]} file"):
+        main(["export", str(src), "--format", fmt, "--out", str(tmp_path / f"x{wrong}")])
+    (tmp_path / "adir").mkdir()
+    with pytest.raises(SystemExit, match="is a folder"):
+        main(["export", str(src), "--format", fmt, "--out", str(tmp_path / "adir")])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir", "src.h5"]
+    assert list((tmp_path / "adir").iterdir()) == []

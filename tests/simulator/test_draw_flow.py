@@ -43,3 +43,35 @@ def test_the_command_draws_a_scenes_flow_and_refuses_one_of_another_size(gt_scen
     else:
         raise AssertionError("a flow of another size was drawn")
     assert not (tmp_path / "c.png").exists()
+
+
+def test_huge_or_nan_flow_is_drawn_or_refused_clearly(tmp_path):
+    """A flow far past the picture is drawn to its edge, a NaN arrow is skipped, and a flow file with NaN
+    at a valid pixel is refused naming the file; an EXR given as a flow is refused, not OpenCV's error."""
+    import pytest
+
+    from common.flow import read_flow
+    from eventio import EventStream, empty_events
+
+    frame = event_frame(EventStream(empty_events(), 16, 16))
+    flow = np.full((16, 16, 2), 1e12)
+    flow[4, 4] = np.nan
+    img = overlay_flow(frame, flow, np.ones((16, 16), bool), scale=2)
+    assert _green(img).any()
+    np.savez(tmp_path / "nan.npz", forward_px=flow.astype(np.float32), valid=np.ones((16, 16), bool))
+    with pytest.raises(ValueError, match="nan.npz.*non-finite"):
+        read_flow(tmp_path / "nan.npz")
+    (tmp_path / "depth.exr").write_bytes(b"\x76\x2f\x31\x01" + b"\0" * 64)
+    with pytest.raises(ValueError, match="depth.exr.*expected a DSEC-Flow 16-bit PNG"):
+        read_flow(tmp_path / "depth.exr")
+    with pytest.raises(ValueError, match="no such flow file"):
+        read_flow(tmp_path / "none.png")
+
+
+def test_plain_pictures_keep_their_scale(gt_scene, tmp_path):
+    import cv2
+
+    events = gt_scene / "events" / "cam0.h5"
+    assert main(["draw-events", str(events), "--t0", "1ms", "--t1", "2ms", "--plain", "--scale", "4",
+                 "--out", str(tmp_path / "p.png")]) == 0
+    assert cv2.imread(str(tmp_path / "p.png")).shape[:2] == (48 * 4, 64 * 4)
