@@ -62,6 +62,7 @@ def run_jobs_on_ray(todo: list[Job], resolved: dict, cfg: BenchConfig, data_root
                     log(f"bench {row_summary(row)}")
             else:
                 record([failed_row(j, outcome.error) for j in groups[outcome.key]])
-                log(f"bench {outcome.key}: FAILED after {opts.retries} retries: {outcome.error}")
+                tries = "" if outcome.refused else f" after {opts.retries} retries"
+                log(f"bench {outcome.key}: FAILED{tries}: {outcome.error}")
 
         run_tasks(specs, opts, done, desc="bench", progress=progress)

@@ -55,6 +55,13 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
     when `ray` is a common.taskpool.RayOptions (Ray is imported only then). Returns all rows."""
     todo = [j for j in jobs(cfg, data_root) if j.study in studies and (not scenes or j.scene in scenes)
             and (not cells or j.cell in cells)]
+    if not todo:          # before any folder or dataset is made
+        from common.config import ConfigError
+
+        asked = ", ".join(f"{k} {v}" for k, v in (("studies", ",".join(studies)), ("scenes", ",".join(scenes or [])),
+                                                    ("cells", ",".join(cells or []))) if v)
+        raise ConfigError(f"bench preset {preset_name!r}: no job for {asked} (a study the preset does not declare, "
+                          "or scenes / cells outside it); nothing to run")
     needed = sorted({j.data_scene for j in todo if not j.dataset})
     resolved = {j.key: j.method_config for j in todo}   # every job's config, checked before any work
     t_start = time.time()

@@ -11,7 +11,8 @@ record results as they come in and nothing finished is lost when a later job fai
 
 Failures: a task that raises, or whose worker process dies, is retried `retries` times (Ray re-runs it,
 possibly on another node; our jobs resume from their checkpoints). After that its outcome carries the
-error and the others go on. Each attempt's stdout/stderr and traceback are appended to its log file.
+error and the others go on. A task whose input is refused (a ValueError: the same on every attempt)
+is not retried: it returns a `Refusal`, reported at once in the words the plain path prints. Each attempt's stdout/stderr and traceback are appended to its log file.
 """
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ class TaskOutcome:
     key: str
     value: Any = None
     error: str | None = None           # None: finished; else the last attempt's error, one line
+    refused: bool = False              # the error is a refusal of the input (not retried)
 
     @property
     def ok(self) -> bool:
@@ -116,6 +118,14 @@ def child_env() -> dict[str, str]:
     return env
 
 
+@dataclass(frozen=True)
+class Refusal:
+    """What a task returns instead of raising when its input is refused (a ValueError: bad config,
+    dataset or file): the same on every attempt, so Ray does not retry it; the driver reports `line`
+    as the task's error, in the words the plain path prints."""
+    line: str
+
+
 def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | None, tracker=None,
                threads: int | None = None) -> Any:
     """One attempt of a job on a worker: announce it, limit its threads, send its output to the job's
@@ -128,7 +138,10 @@ def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | No
     if threads is not None:
         limit_threads(threads)
     if log_path is None:
-        return fn(*args)
+        try:
+            return fn(*args)
+        except ValueError as exc:
+            return Refusal(_one_line(exc))
     Path(log_path).parent.mkdir(parents=True, exist_ok=True)
     before = os.environ.get(progress.ENV)
     os.environ[progress.ENV] = str(progress_path(log_path))     # the job's loops (and its children) report there
@@ -138,6 +151,10 @@ def run_logged(fn: Callable[..., Any], args: tuple, key: str, log_path: str | No
                   f"(pid {os.getpid()})")
             try:
                 value = fn(*args)
+            except ValueError as exc:         # a refusal of the job's input: the same on every attempt
+                traceback.print_exc()
+                print(f"--- {key}: refused (not retried)")
+                return Refusal(_one_line(exc))
             except BaseException:
                 traceback.print_exc()
                 raise
@@ -187,10 +204,14 @@ def ray_session(opts: RayOptions, log_path: str | os.PathLike | None = None):
         yield ray
         return
     kwargs = {"log_to_driver": False, "include_dashboard": False}
-    if opts.address == LOCAL:
-        ray.init(num_cpus=opts.local_cpus or os.cpu_count(), **kwargs)
-    else:
-        ray.init(address=opts.address, **kwargs)
+    try:
+        if opts.address == LOCAL:
+            ray.init(num_cpus=opts.local_cpus or os.cpu_count(), **kwargs)
+        else:
+            ray.init(address=opts.address, **kwargs)
+    except Exception as exc:      # noqa: BLE001 - Ray raises many kinds here; each means the same to the user
+        raise ConnectionError(f"ray: cannot {'start a local Ray' if opts.address == LOCAL else 'connect to Ray at ' + repr(opts.address)}"
+                              f" ({_one_line(exc)})") from None
     restore = _ray_messages_to(Path(log_path) if log_path else Path(tempfile.gettempdir()) / f"e4dgs-ray-{os.getpid()}.log")
     try:
         yield ray
@@ -237,7 +258,8 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
     outcomes: list[TaskOutcome] = []
     if not specs:
         return outcomes
-    with ray_session(opts) as ray:
+    logs = next((Path(s.log_path).parent for s in specs if s.log_path is not None), None)
+    with ray_session(opts, logs / "ray.log" if logs is not None else None) as ray:
         # restarted if killed (by Ray's memory monitor, say): its count starts again, the grid goes on
         global _TRACKER_NAME
         _TRACKER_NAME = f"e4dgs-taskpool-tracker-{os.getpid()}-{next(_RUNS)}"
@@ -261,7 +283,10 @@ def run_tasks(specs: list[TaskSpec], opts: RayOptions, on_outcome: Callable[[Tas
                 for ref in ready:
                     spec = pending.pop(ref)
                     try:
-                        outcome = TaskOutcome(spec.key, value=ray.get(ref))
+                        value = ray.get(ref)
+                        outcome = (TaskOutcome(spec.key, error=value.line, refused=True) if isinstance(value, Refusal)
+                                   else TaskOutcome(spec.key, value=value))
+                        failed += isinstance(value, Refusal)
                     except Exception as exc:     # noqa: BLE001 - any failure of one task is that task's outcome
                         outcome = TaskOutcome(spec.key, error=_one_line(exc))
                         failed += 1

@@ -7,8 +7,9 @@ global state, so each scene renders in its own interpreter), several side by sid
 
 With `ray` (a common.taskpool.RayOptions) each scene is a Ray task that runs the same worker process on
 whichever node Ray picks; `out` must then be a path every node sees (a shared file system). A task
-whose worker dies or fails is retried (the scene resumes from its checkpoint); the worker's output
-goes to out/logs/<scene>.log.
+whose worker dies is retried (the scene resumes from its checkpoint); one that refuses its input
+(exits with an error status) is not, and its error line is reported as the plain path prints it;
+the worker's output goes to out/logs/<scene>.log, Ray's own messages to out/logs/ray.log.
 """
 from __future__ import annotations
 
@@ -48,9 +49,16 @@ def generate_scene_task(preset: str | Path, scene: str, out: Path, checkpoint_ev
     from common.taskpool import child_env
 
     proc = subprocess.run(_worker_cmd(preset, scene, out, checkpoint_every, extra) + ["--no-progress"],
-                          stdout=sys.stdout, stderr=sys.stderr, env=child_env(), preexec_fn=die_with_parent)
+                          stdout=sys.stdout, stderr=subprocess.PIPE, text=True, env=child_env(),
+                          preexec_fn=die_with_parent)
+    sys.stderr.write(proc.stderr)                       # into the task's log, as the plain path shows it
     if proc.returncode != 0:
-        raise RuntimeError(f"scene {scene}: worker exited with status {proc.returncode}")
+        said = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+        line = next((ln for ln in reversed(said) if ln.startswith("error:")), said[-1] if said else "")
+        if crashed(proc.returncode):                    # a crash: Ray runs it again, from its checkpoint
+            raise RuntimeError(f"scene {scene}: worker died from signal {-proc.returncode}")
+        # its own error status: a refusal of the input, the same on every attempt (not retried)
+        raise ValueError(f"scene {scene}: {line.removeprefix('error: ') or f'worker exited with status {proc.returncode}'}")
     return scene
 
 
@@ -74,7 +82,7 @@ def _generate_on_ray(preset, scenes: list[str], out: Path, checkpoint_every: int
     def done(outcome) -> None:
         if not outcome.ok:
             failed.append(outcome.key)
-            log(f"dataset: {outcome.key} failed after {ray.retries} retries: {outcome.error} (log: {out / 'logs'})")
+            log(f"dataset: {outcome.key} failed: {outcome.error} (log: {out / 'logs' / (outcome.key + '.log')})")
 
     run_tasks(specs, ray, done, desc="dataset")
     return failed

@@ -550,3 +550,15 @@ def test_bench_train_times_the_mlp_at_each_precision_and_the_trajectories_beside
     # --against pairs this tree's workers with the revision's factor by factor
     from tools.bench_train import revision_factors
     assert [f for _, _, f in worker_specs(None, [], [2, 4])] == revision_factors([2, 4]) == [1, 2, 4]
+
+
+def test_a_study_the_preset_lacks_is_an_error_and_leaves_nothing(tmp_path, capsys):
+    """`bench --studies speed` on a preset without a speed study: one clear line, exit non-zero, no
+    results folder and no dataset started."""
+    from e4dgs.cli import main
+
+    out = tmp_path / "runs"
+    rc = main(["bench", "--preset", "tiny", "--studies", "speed", "--out", str(out), "--data", str(tmp_path / "data")])
+    err = capsys.readouterr().err
+    assert rc != 0 and "no job for studies speed" in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists() and not (tmp_path / "data").exists()

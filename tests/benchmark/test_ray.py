@@ -173,6 +173,43 @@ def test_taskpool_reports_each_outcome_once_and_retries_failures(tmp_path, local
         run_tasks(specs + specs[:1], RayOptions(), seen.append, progress=False)
 
 
+def test_a_refused_input_is_not_retried_and_reads_as_on_the_plain_path(tmp_path, local_ray):
+    """A task whose input is refused (ValueError) runs once and reports the plain path's words; a
+    failure of another kind is retried."""
+    import operator
+
+    specs = [TaskSpec("refused", int, ("seven",), log_path=tmp_path / "refused.log"),
+             TaskSpec("broken", operator.truediv, (1, 0), log_path=tmp_path / "broken.log")]
+    by = {o.key: o for o in run_tasks(specs, RayOptions(retries=2), lambda o: None, progress=False)}
+    assert by["refused"].refused and by["refused"].error == "ValueError: invalid literal for int() with base 10: 'seven'"
+    assert (tmp_path / "refused.log").read_text().count("attempt started") == 1
+    assert not by["broken"].refused and by["broken"].error.startswith("ZeroDivisionError")
+    assert (tmp_path / "broken.log").read_text().count("attempt started") == 3
+
+
+def test_a_scene_refused_on_ray_says_what_the_plain_path_says(tmp_path, local_ray):
+    """A scene whose blur target cannot be reached: the worker's own error line reaches the console with
+    and without Ray, the refusal is not retried, and Ray leaves its log under the output folder."""
+    import tempfile
+
+    from datagen.build import generate_dataset
+
+    preset = tmp_path / "p.yaml"
+    preset.write_text("scenes: [cubes]\noverrides:\n  duration_s: 0.02\n  render: {width: 32, height: 24, samples: 1}\n"
+                      "  camera: {n_cameras: 1}\n  blur: {target_px: {strong: 400.0}, max_exposure_ms: 2.0}\n")
+    before = set(Path(tempfile.gettempdir()).glob("e4dgs-ray-*.log"))
+    said: list[str] = []
+    assert generate_dataset(str(preset), None, tmp_path / "ray", log=said.append, ray=RayOptions(retries=2)) == ["cubes"]
+    line = next(s for s in said if "cubes failed" in s)
+    assert "blur" in line and "cannot be reached" in line and "status" not in line, said
+    assert (tmp_path / "ray" / "logs" / "cubes.log").read_text().count("attempt started") == 1
+    plain = subprocess.run([sys.executable, "-m", "datagen.generate", "--scene", "cubes", "--preset", str(preset),
+                            "--out", str(tmp_path / "plain"), "--no-progress"], capture_output=True, text=True, cwd=ROOT)
+    error = plain.stderr.strip().splitlines()[-1].removeprefix("error: ")
+    assert plain.returncode != 0 and error in line, (error, line)
+    assert set(Path(tempfile.gettempdir()).glob("e4dgs-ray-*.log")) == before
+
+
 def test_taskpool_bar_redraws_on_a_change_not_every_poll(tmp_path, local_ray, capsys):
     """A 6-s task polled every second: its status line is drawn when it changes (and around the
     outcome's log line), so a job log (stderr not a terminal) is not filled with one bar per second."""
