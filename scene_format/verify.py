@@ -1,6 +1,7 @@
 """`e4dgs check`: verify a generated scene (or every scene under a dataset root) against its
-manifest: each listed file exists with the recorded size and SHA-256, and each event file passes
-the readers' content checks (eventio.event_check).
+manifest: each listed file exists with the recorded size and SHA-256, each event file passes the
+readers' content checks (eventio.event_check), and each ground-truth map, event-label file and
+exported event file is what its place says (a manifest re-signed over a wrong file fails).
 
     problems = verify_scene(Path("data/quick/lego"))     # [] when everything matches
 """
@@ -67,7 +68,76 @@ def verify_scene(scene_dir: Path, progress: Callable[[str], None] | None = None)
                 read_info(path)
             except EventFileError as exc:
                 problems.append(str(exc))
+        else:
+            problem = content_problem(scene_dir, rel, path)
+            if problem:
+                problems.append(problem)
     return problems + count_problems(scene_dir, manifest)
+
+
+def _sensor_size(scene_dir: Path) -> tuple[int, int] | None:
+    """(height, width) of the scene's cameras, from its first event file; None if unreadable."""
+    try:
+        info = read_info(scene_dir / "events" / "cam0.h5")
+        return int(info["height"]), int(info["width"])
+    except (EventFileError, OSError, KeyError, ValueError):
+        return None
+
+
+def content_problem(scene_dir: Path, rel: str, path: Path) -> str | None:
+    """What is wrong with the content of a listed file whose hash matches (a manifest re-signed over a
+    wrong file): ground-truth maps of the sensor's size and type, one event label per event, and
+    exported event files that read as event files. None when it is what its place says."""
+    import numpy as np
+
+    parts = rel.split("/")
+    hw = _sensor_size(scene_dir)
+    try:
+        if parts[0] == "ground_truth" and len(parts) == 4 and parts[1] in ("flow", "ids", "depth", "normals", "velocity"):
+            kind, suffix = parts[1], path.suffix.lower()
+            if suffix == ".png":
+                import cv2
+
+                img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+                channels = 3 if kind == "flow" else 1
+                if img is None or img.dtype != np.uint16 or (img.shape[2] if img.ndim == 3 else 1) != channels:
+                    return (f"{path}: not a 16-bit {channels}-channel PNG (a ground-truth {kind} map; "
+                            f"got {'an unreadable file' if img is None else f'{img.dtype}, shape {img.shape}'})")
+                if hw is not None and img.shape[:2] != hw:
+                    return f"{path}: {img.shape[1]}x{img.shape[0]} pixels, the scene's cameras {hw[1]}x{hw[0]}"
+            elif suffix == ".exr":
+                from common.imageio import read_exr
+
+                img = read_exr(path)
+                if hw is not None and img.shape[:2] != hw or not np.isfinite(img).all():
+                    return f"{path}: not a finite {kind} map of the cameras' size (shape {img.shape})"
+            elif suffix == ".npz":
+                from common.flow import read_flow
+
+                flow, _ = read_flow(path)
+                if hw is not None and flow.shape[:2] != hw:
+                    return f"{path}: {flow.shape[1]}x{flow.shape[0]} pixels, the scene's cameras {hw[1]}x{hw[0]}"
+        elif parts[0] == "ground_truth" and parts[1] == "event_ids" and len(parts) == 3:
+            labels = np.load(path, mmap_mode="r", allow_pickle=False)
+            n = int(read_info(scene_dir / "events" / parts[2].replace(".npy", ".h5"))["n_events"])
+            if labels.ndim != 1 or len(labels) != n:
+                return f"{path}: {len(labels)} labels for {n} events in events/{parts[2].replace('.npy', '.h5')}"
+        elif parts[0] == "exports" and path.suffix.lower() in (".aedat4", ".raw", ".bag", ".npz", ".txt", ".mcap", ".db3"):
+            from eventio.formats import detect_format
+
+            if path.suffix.lower() not in (".mcap", ".db3"):     # a ROS2 bag is checked as its folder's parts
+                found = detect_format(path)
+                expected = parts[1] if len(parts) == 3 else "rosbag"
+                if found != expected:
+                    return f"{path}: holds {found}, not the {expected} events its folder says"
+                if found == "txt":                              # E2VID text: a "width height" first line
+                    with open(path) as fh:
+                        head = fh.readline().split()
+                    if len(head) != 2 or not all(v.isdigit() for v in head):
+                        return f"{path}: not an E2VID event text file (its first line is not 'width height')"
+    except (OSError, ValueError, KeyError, EventFileError) as exc:
+        return f"{path}: {' '.join(str(exc).split())}"
+    return None
 
 
 def unlisted_files(scene_dir: Path) -> list[str]:

@@ -391,3 +391,64 @@ def test_the_last_kept_frame_has_no_flow_and_every_frame_a_velocity(gt_scene):
     last = d.ground_truth(0, len(d.kept_times_us) - 1)
     assert last.flow_px is None and last.velocity_px_per_ms is not None
     assert d.ground_truth(0, 0).flow_px is not None
+
+
+def _resign_file(scene: Path, rel: str, content: bytes) -> None:
+    """Replace a listed file and re-sign the manifest over it (what a checksum alone cannot catch)."""
+    from common.fileio import sha256_file
+
+    path = scene / rel
+    path.write_bytes(content)
+    m = json.loads((scene / "manifest.json").read_text())
+    m["files"][rel] = {"bytes": path.stat().st_size, "sha256": sha256_file(path)}
+    (scene / "manifest.json").write_text(json.dumps(m, indent=1))
+
+
+@pytest.mark.parametrize("case", ["labels", "flow_photo", "ids_size", "exr_as_npz"])
+def test_check_reads_ground_truth_content_behind_a_resigned_manifest(gt_scene, tmp_path, case):
+    """`e4dgs check` with the manifest re-signed over a wrong file: 100 labels for a camera's events, an
+    8-bit photo as a flow PNG, an id map of another size, depth bytes as a flow .npz: each named."""
+    import shutil
+
+    import cv2
+
+    from scene_format.verify import verify_scene
+
+    scene = tmp_path / "cubes"
+    shutil.copytree(gt_scene, scene)
+    assert verify_scene(scene) == []
+    photo = cv2.imencode(".png", np.full((48, 64, 3), 128, np.uint8))[1].tobytes()
+    small = cv2.imencode(".png", np.zeros((10, 10), np.uint16))[1].tobytes()
+    buf = __import__("io").BytesIO()
+    np.save(buf, np.zeros(100, np.uint8))
+    rel, content, expected = {
+        "labels": ("ground_truth/event_ids/cam0.npy", buf.getvalue(), "100 labels for"),
+        "flow_photo": ("ground_truth/flow/cam0/00001.png", photo, "not a 16-bit 3-channel PNG"),
+        "ids_size": ("ground_truth/ids/cam0/00001.png", small, "10x10 pixels, the scene's cameras"),
+        "exr_as_npz": ("ground_truth/flow/cam0/00001.npz", (scene / "ground_truth/depth/cam0/00001.exr").read_bytes(),
+                       "not a ground-truth flow file"),
+    }[case]
+    _resign_file(scene, rel, content)
+    problems = verify_scene(scene)
+    assert len(problems) == 1 and rel in problems[0] and expected in problems[0], problems
+
+
+def test_check_reads_exported_event_files_behind_a_resigned_manifest(gt_scene, tmp_path):
+    import shutil
+
+    from datagen.exports import ensure_exports
+    from scene_format.verify import verify_scene
+
+    scene = tmp_path / "cubes"
+    shutil.copytree(gt_scene, scene)
+    assert ensure_exports(scene, ("aedat4", "txt"), log=lambda s: None) == ["aedat4", "txt"]
+    assert verify_scene(scene) == []
+    _resign_file(scene, "exports/txt/cam0.txt", b"hello, these are notes\n")
+    _resign_file(scene, "exports/aedat4/cam1.aedat4", (scene / "exports/txt/cam1.txt").read_bytes())
+    problems = verify_scene(scene)
+    assert len(problems) == 2, problems
+    assert "exports/txt/cam0.txt: not an E2VID event text file" in problems[1] or \
+        "exports/txt/cam0.txt: not an E2VID event text file" in problems[0]
+    assert any("exports/aedat4/cam1.aedat4: " in p and "not a recognised event file" in p for p in problems), problems
+    _resign_file(scene, "exports/aedat4/cam1.aedat4", (scene / "events/cam1.h5").read_bytes())
+    assert any("exports/aedat4/cam1.aedat4: holds h5, not the aedat4 events" in p for p in verify_scene(scene))
