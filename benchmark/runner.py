@@ -16,7 +16,6 @@ against training wall-clock seconds, iterations, Gaussian count, package version
 from __future__ import annotations
 
 import json
-import sys
 import time
 from functools import partial
 from pathlib import Path
@@ -123,6 +122,3 @@ def run_bench(cfg: BenchConfig, preset_name: str, data_root: Path, out_root: Pat
         f"{time.time() - t0:.0f} s jobs) -> {results_path}")
     return rows
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit("use `e4dgs bench`")

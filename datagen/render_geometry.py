@@ -108,9 +108,6 @@ class GeometrySampler:
             yield out
             ev.to_mesh_clear()
 
-    def local_vertices(self) -> list[np.ndarray]:
-        return [co for co, _, _ in self._meshes()]
-
     def find_deforming(self, taus) -> None:
         """Which parts' evaluated meshes (in their own frame) change over taus (deforming parts);
         TopologyChangeError naming a part whose vertex or polygon count changes."""

@@ -151,7 +151,7 @@ def test_a_scene_yaml_copied_under_a_new_name_says_what_to_add(tmp_path, capsys)
 
 
 def test_a_renamed_variant_of_a_built_in_scene_builds_from_its_builder(tmp_path, capsys):
-    pytest.importorskip("bpy")
+
     from datagen.config import SCENES_DIR
     from scene_format.reader import SceneDataset
 

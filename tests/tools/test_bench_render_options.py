@@ -2,9 +2,8 @@
 (rendering and simulation are deterministic), and the variants are rendered and compared."""
 import re
 
-import pytest
 
-pytest.importorskip("bpy")
+import bpy  # noqa: F401,E402  (a required dependency: a broken install fails here, not skips)
 
 
 def test_render_options_table_on_the_tiny_preset(capsys):
