@@ -94,3 +94,36 @@ def test_every_config_file_a_page_names_exists(page):
 def test_a_renamed_config_path_is_caught():
     assert missing_config_paths("see configs/recon/bench/d3dgs_quick.yaml and configs/datasets/quick.yaml") == [
         "configs/recon/bench/d3dgs_quick.yaml"]
+
+
+def yaml_comments(path: Path) -> str:
+    """The comment text of a YAML file (what follows '#' on each line), as prose."""
+    return "\n".join(line.split("#", 1)[1] for line in path.read_text().splitlines() if "#" in line)
+
+
+YAML_FILES = sorted((ROOT / "configs").rglob("*.yaml")) + sorted((ROOT / "blender_scenes").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", YAML_FILES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_yaml_comments_hold_to_the_configs_too(path):
+    """A config's comments are docs as well: the claims and paths the pages are held to, and a recipe's
+    header stating its iterations states the value it sets."""
+    text = yaml_comments(path)
+    assert contradictions(text, quick()) == []
+    assert missing_config_paths(text) == []
+    if "recipes" in path.parts:
+        header = "\n".join(ln for ln in path.read_text().splitlines()[:4] if ln.startswith("#"))
+        # "N iterations" as the recipe's length (not "every N iterations" nor "written for N iterations")
+        stated = re.search(r"(?<!every )(?<!written for )\b([\d,]+) iterations\b", header)
+        set_to = (yaml.safe_load(path.read_text()) or {}).get("train", {}).get("iterations")
+        if stated and set_to is not None:
+            assert int(stated.group(1).replace(",", "")) == set_to, f"{path}: the header says {stated.group(0)}, " \
+                                                                   f"train.iterations is {set_to}"
+
+
+def test_a_recipe_header_that_disagrees_is_caught(tmp_path):
+    recipe = tmp_path / "recipes" / "r.yaml"
+    recipe.parent.mkdir()
+    recipe.write_text("# E-4DGS for the quick benchmark: 450 iterations\ntrain:\n  iterations: 900\n")
+    with pytest.raises(AssertionError, match="the header says 450 iterations"):
+        test_yaml_comments_hold_to_the_configs_too(recipe)
