@@ -134,7 +134,9 @@ class DeprecatedOption(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         import sys
 
-        print(f"warning: {option_string} is deprecated (kept until 0.3): {self.instead}", file=sys.stderr)
+        from common.deprecations import ENDS
+
+        print(f"warning: {option_string} is deprecated (kept until {ENDS}): {self.instead}", file=sys.stderr)
         setattr(namespace, self.dest, values)
 
 

@@ -14,6 +14,7 @@ import sys
 import warnings
 
 from common.config import ConfigWarning
+from common.deprecations import kept_until, renamed_commands
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -50,7 +51,7 @@ STAGES = (("data", ("dataset", "check", "masks", "simulate", "realism")),
           ("score", ("bench", "testviews", "score", "verify")),
           ("look", ("viewer", "draw-events")),
           ("convert", ("export", "import")))
-RENAMED_COMMANDS = {"view": "draw-events"}      # old name -> new (kept until 0.3)
+RENAMED_COMMANDS = renamed_commands()            # old name -> new (common.deprecations)
 
 
 def group_commands(parser: argparse.ArgumentParser, sub) -> None:
@@ -140,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command in RENAMED_COMMANDS:
-        print(f"warning: `e4dgs {args.command}` is deprecated (kept until 0.3): it is `e4dgs "
+        print(f"warning: `e4dgs {args.command}` is deprecated (kept until {kept_until('command', args.command)}): it is `e4dgs "
               f"{RENAMED_COMMANDS[args.command]}`", file=sys.stderr)
         args.command = RENAMED_COMMANDS[args.command]
     check_outputs_apart(args, parser)

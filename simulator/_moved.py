@@ -12,5 +12,8 @@ import warnings
 
 def alias(old: str, new: str) -> None:
     """Make module `old` the already-importable module `new`, with a deprecation line."""
-    warnings.warn(f"`{old}` moved to `{new}`; the old name keeps working until 0.3", FutureWarning, stacklevel=3)
+    from common.deprecations import kept_until
+
+    warnings.warn(f"`{old}` moved to `{new}`; the old name keeps working until {kept_until('module', old)}",
+                  FutureWarning, stacklevel=3)
     sys.modules[old] = importlib.import_module(new)

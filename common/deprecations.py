@@ -1,0 +1,55 @@
+"""Every old name the toolkit still accepts, in one registry with the release each one ends at.
+
+    from common.deprecations import REGISTRY, ENDS, kept_until
+    kept_until("module", "simulator.h5io")      # "0.3"
+
+Kinds: `module` (an old import path, an alias of the new module), `command` (an old `e4dgs`
+subcommand), `option` (an old option spelling, stored into the new one), `config` (an old config file
+name or path, common.config_files) and `bench preset` (benchmark.config). Each mechanism reads its
+names and its deprecation line's release from here; tests/common/test_deprecations.py fails once the
+toolkit's version reaches an entry's end, so its removal is not forgotten, and fails on an old name
+a mechanism accepts that is not registered.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+ENDS = "0.3"          # the release the names deprecated in 0.2 are removed in
+
+
+@dataclass(frozen=True)
+class Deprecated:
+    kind: str         # module | command | option | config | bench preset
+    old: str
+    new: str
+    since: str = "0.2"
+    ends: str = ENDS
+
+
+_MOVED_TO_EVENTIO = ("events", "event_check", "h5io", "evt_codec", "vendor_formats", "rosbag_io", "ros_messages",
+                     "export", "formats")
+# old option spelling -> what replaces it, for each command that had one (common.argtypes.add_main_input)
+_OPTIONS = {"e4dgs bench --methods": "--cells", "e4dgs simulate --frames": "FRAMES (first argument)",
+            "e4dgs train --scene": "SCENE (first argument)", "e4dgs render --model": "MODEL (first argument)",
+            "e4dgs e2vid --events": "EVENTS (first argument)", "e4dgs score --renders": "RENDERS (first argument)"}
+
+REGISTRY: tuple[Deprecated, ...] = (
+    *(Deprecated("module", f"simulator.{m}", f"eventio.{m}") for m in _MOVED_TO_EVENTIO),
+    Deprecated("command", "view", "draw-events"),
+    *(Deprecated("option", old, new) for old, new in _OPTIONS.items()),
+)
+
+
+def registered(kind: str) -> dict[str, Deprecated]:
+    """{old name: entry} of one kind."""
+    return {d.old: d for d in REGISTRY if d.kind == kind}
+
+
+def kept_until(kind: str, old: str) -> str:
+    """The release an old name ends at; KeyError for a name that is not registered."""
+    return registered(kind)[old].ends
+
+
+def renamed_commands() -> dict[str, str]:
+    """{old command: new command}."""
+    return {d.old: d.new for d in REGISTRY if d.kind == "command"}
