@@ -198,8 +198,9 @@ def run_check(args: argparse.Namespace) -> int:
     failed = len(unfinished)
     for d in scenes:
         try:
-            n = len(json.loads((d / "manifest.json").read_text()).get("files", {}))
-        except ValueError:
+            files = json.loads((d / "manifest.json").read_text()).get("files", {})
+            n = len(files) if isinstance(files, dict) else 0
+        except (ValueError, AttributeError):          # not JSON, or not a mapping: verify_scene says so
             n = 0
         with tqdm(total=n, desc=f"check {d.name}", unit="file", leave=False) as bar:
             problems = verify_scene(d, progress=lambda _: bar.update(1))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import math
 from pathlib import Path
 
@@ -109,6 +110,10 @@ def run_realism(args: argparse.Namespace) -> int:
             raise SystemExit(f"error: {p}: {exc}") from None
     names = [p.name for p in paths] if len({p.name for p in paths}) == len(paths) else [str(p) for p in paths]
     dist = distances(stats[0], stats[1]) if len(stats) == 2 else None
+    if dist is not None and (stats[0].width, stats[0].height) != (stats[1].width, stats[1].height):
+        print(f"warning: {names[0]} is {stats[0].width}x{stats[0].height} pixels and {names[1]} "
+              f"{stats[1].width}x{stats[1].height}: per-pixel figures and the distances compare, the event rate "
+              "and active fraction are of different sensors", file=sys.stderr)
     print(report_table(stats, names, dist), end="")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)

@@ -20,11 +20,15 @@ def main(argv=None) -> int:
     ap.add_argument("root", type=existing_folder)
     ap.add_argument("--moving-events", action="store_true", help="the moving pixels' share of the events per scene")
     args = ap.parse_args(argv)
+    scenes = sorted(p for p in args.root.iterdir() if (p / "manifest.json").exists())
+    if not scenes:
+        raise SystemExit(f"dataset_summary: error: {args.root}: no finished scene folder (none holds a manifest.json); "
+                         "expected a dataset root such as data/quick")
     print(f"dataset {args.root}")
     print("| scene | timestamps | render s | simulate s | write s | total s | events per camera (M) | size MB | preview |")
     print("|---|---|---|---|---|---|---|---|---|")
     total_s = total_mb = 0.0
-    for d in sorted(p for p in args.root.iterdir() if (p / "manifest.json").exists()):
+    for d in scenes:
         m = json.loads((d / "manifest.json").read_text())
         mb = sum(p.stat().st_size for p in d.rglob("*") if p.is_file()) / 1e6
         s = m["seconds"]

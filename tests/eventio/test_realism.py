@@ -133,3 +133,16 @@ def test_the_realism_command_prints_both_and_writes_its_files(tmp_path, capsys):
     assert (tmp_path / "r" / "realism.png").read_bytes()[:4] == b"\x89PNG"
     with pytest.raises(SystemExit, match="missing.h5: no such file"):
         main(["realism", str(tmp_path / "missing.h5")])
+
+
+def test_recordings_of_different_sensors_are_compared_with_a_warning(tmp_path, capsys):
+    from eventio.h5io import write_events
+
+    rng = np.random.default_rng(0)
+    for name, (w, h) in (("small.h5", (16, 12)), ("big.h5", (64, 48))):
+        n = 500
+        write_events(tmp_path / name, EventStream(make_events(np.sort(rng.integers(0, 100_000, n)), rng.integers(0, w, n),
+                                                              rng.integers(0, h, n), rng.choice([-1, 1], n)), w, h))
+    assert main(["realism", str(tmp_path / "small.h5"), str(tmp_path / "big.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "small.h5 is 16x12 pixels and big.h5 64x48" in err
