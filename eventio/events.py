@@ -29,13 +29,29 @@ def empty_events() -> np.ndarray:
 
 
 def make_events(t_us, x, y, p) -> np.ndarray:
-    """Pack column arrays [N] into an `EVENT_DTYPE` array (no sorting, no validation)."""
-    t_us = np.asarray(t_us)
-    out = np.empty(t_us.shape[0], dtype=EVENT_DTYPE)
-    out["t"] = t_us
-    out["x"] = x
-    out["y"] = y
-    out["p"] = p
+    """Pack column arrays [N] into an `EVENT_DTYPE` array (no sorting, no validation of ranges).
+
+    EventValidationError for columns of different lengths, times that are not whole microseconds
+    (a float 1.7 would silently become 1), or values a column's type cannot hold (x = -1, p = 300)."""
+    cols = {"t": np.asarray(t_us), "x": np.asarray(x), "y": np.asarray(y), "p": np.asarray(p)}
+    for name, col in cols.items():
+        if col.ndim != 1:
+            raise EventValidationError(f"make_events: {name} must be one-dimensional, got shape {col.shape}")
+        if col.dtype.kind not in "iub":
+            if col.dtype.kind != "f" or not np.all(np.isfinite(col)) or np.any(col != np.round(col)):
+                raise EventValidationError(f"make_events: {name} must hold whole numbers (microseconds for t), "
+                                           f"got dtype {col.dtype}" + (" with fractions or non-finite values"
+                                                                       if col.dtype.kind == "f" else ""))
+    lengths = {name: len(col) for name, col in cols.items()}
+    if len(set(lengths.values())) > 1:
+        raise EventValidationError(f"make_events: columns of different lengths {lengths}")
+    out = np.empty(lengths["t"], dtype=EVENT_DTYPE)
+    for name, col in cols.items():
+        info = np.iinfo(out.dtype[name])
+        if col.size and (col.min() < info.min or col.max() > info.max):
+            raise EventValidationError(f"make_events: {name} holds values outside {info.min} .. {info.max} "
+                                       f"({out.dtype[name]})")
+        out[name] = col
     return out
 
 

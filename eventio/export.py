@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -80,7 +81,9 @@ def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
                              f"{' '.join(header)[:80]!r}")
         width, height = int(header[0]), int(header[1])
         try:
-            data = np.loadtxt(fh, dtype=str, ndmin=2)
+            with warnings.catch_warnings():            # a header-only file is an empty recording, not a warning
+                warnings.filterwarnings("ignore", message="loadtxt: input contained no data", category=UserWarning)
+                data = np.loadtxt(fh, dtype=str, ndmin=2)
         except ValueError as exc:
             raise ValueError(f"{path}: expected lines 't x y p' ({' '.join(str(exc).split())[:120]})") from None
     if data.size == 0:

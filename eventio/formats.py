@@ -30,8 +30,13 @@ SUFFIX = {"h5": ".h5", "aedat4": ".aedat4", "evt3": ".raw", "evt2": ".raw", "ros
 
 def write_stream(path: str | os.PathLike, stream: EventStream, fmt: str, topic: str = "/cam0/events",
                  message_us: int = 1000) -> Path:
-    """One stream as a file of format `fmt` (see FORMATS)."""
+    """One stream as a file of format `fmt` (see FORMATS). Every format refuses, before writing, a
+    stream its readers would refuse (EventValidationError: unsorted times, x or y outside the sensor,
+    polarity not +-1)."""
     path = Path(path)
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown format {fmt!r} (expected one of {', '.join(FORMATS)})")
+    stream.validate()
     if fmt == "h5":
         return h5io.write_events(path, stream)
     if fmt == "aedat4":

@@ -333,7 +333,14 @@ def window_indices(f: h5py.File, t0_us: int, t1_us: int) -> tuple[int, int]:
 
 
 def read_window(path: str | os.PathLike, t0_us: int, t1_us: int) -> EventStream:
-    """Events with t0_us <= t < t1_us (absolute microseconds), read through ms_to_idx."""
+    """Events with t0_us <= t < t1_us (absolute microseconds), read through ms_to_idx. ValueError for
+    times that are not integers or a window that ends before it starts."""
+    for name, v in (("t0_us", t0_us), ("t1_us", t1_us)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+            raise ValueError(f"{path}: read_window: {name} must be an integer number of microseconds, "
+                             f"got {v!r} ({type(v).__name__})")
+    if t1_us < t0_us:
+        raise ValueError(f"{path}: read_window: the window ends ({t1_us} us) before it starts ({t0_us} us)")
     with open_checked(path) as f:
         i0, i1 = window_indices(f, int(t0_us), int(t1_us))
         return EventStream(read_slice(f, i0, i1), int(f.attrs["width"]), int(f.attrs["height"]))

@@ -71,3 +71,30 @@ def test_what_a_reader_refuses_its_writer_refuses_before_writing(fmt, s, tmp_pat
     with pytest.raises(EventValidationError):
         write_stream(out, s, fmt)
     assert list(folder.iterdir()) == []                     # nothing written, no temporary left
+
+
+def test_api_samples_refuse_clearly(tmp_path):
+    """make_events with columns of different lengths or fractional times, read_window with a text or
+    an inverted window, and a header-only E2VID text file (an empty recording, without NumPy's warning)."""
+    import warnings
+
+    from eventio import read_window, write_events
+    from eventio.export import read_e2vid_txt
+
+    with pytest.raises(EventValidationError, match="different lengths"):
+        make_events([1, 2], [1], [1], [1])
+    with pytest.raises(EventValidationError, match="whole numbers"):
+        make_events([1.7, 2.2], [1, 1], [1, 1], [1, 1])
+    with pytest.raises(EventValidationError, match="outside -128 .. 127"):
+        make_events([1], [1], [1], [300])
+    assert make_events(np.array([1.0, 2.0]), [1, 1], [1, 1], [1, -1])["t"].tolist() == [1, 2]
+    write_events(tmp_path / "e.h5", EventStream(make_events([1, 5], [1, 1], [1, 1], [1, -1]), 4, 4))
+    with pytest.raises(ValueError, match="t0_us must be an integer"):
+        read_window(tmp_path / "e.h5", "1ms", 5)
+    with pytest.raises(ValueError, match="ends .* before it starts"):
+        read_window(tmp_path / "e.h5", 500, 100)
+    (tmp_path / "h.txt").write_text("4 4\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = read_e2vid_txt(tmp_path / "h.txt")
+    assert len(s) == 0 and (s.width, s.height) == (4, 4)
