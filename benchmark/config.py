@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from common.config import ConfigError, build_config, to_dict
+from common.deprecations import BENCH_PRESETS, kept_until
 
 REPO = Path(__file__).resolve().parent.parent
 PRESET_DIR = REPO / "configs" / "bench"
@@ -182,8 +183,8 @@ class BenchConfig:
         return float(self.speed_levels[level]) if level else None
 
 
-# Bench presets renamed in 0.2 (kept until 0.3): old name -> (preset, overrides of every cell).
-RENAMED_PRESETS = {"paper_gpu": ("paper", {"train.device": "cuda", "train.backend": "gsplat"})}
+# Bench presets renamed in 0.2: old name -> (preset, overrides of every cell) (common.deprecations).
+RENAMED_PRESETS = BENCH_PRESETS
 
 
 def load_bench(preset: str | Path, overrides: dict[str, Any] | None = None) -> BenchConfig:
@@ -196,7 +197,8 @@ def load_bench(preset: str | Path, overrides: dict[str, Any] | None = None) -> B
     if str(preset) in RENAMED_PRESETS:
         new, extra = RENAMED_PRESETS[str(preset)]
         sets = " ".join(f"--set {k}={v}" for k, v in extra.items())
-        warnings.warn(f"bench preset {preset!r} is an old name (kept until 0.3): use `--preset {new} {sets}`",
+        warnings.warn(f"bench preset {preset!r} is an old name (kept until {kept_until('bench preset', str(preset))}): "
+                      f"use `--preset {new} {sets}`",
                       DeprecatedName, stacklevel=2)
         preset, overrides = new, {**extra, **(overrides or {})}
     path = find("bench", preset)

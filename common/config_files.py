@@ -19,24 +19,23 @@ import warnings
 from pathlib import Path
 
 from common.config import ConfigWarning
+from common.deprecations import CONFIG_NAMES, kept_until
 from common.provenance import REPO
 
 KINDS = ("datasets", "sensors", "recipes", "bench")
 
-# old name (a path relative to the repository, or a bare name) -> (kind, new name)
-_RECIPES_OLD = {f"configs/recon/bench/{m}_quick.yaml": f"{m}/quick"
-                for m in ("d3dgs", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")}
-_RECIPES_OLD |= {f"bench/{m}_quick": f"{m}/quick" for m in ("d3dgs", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")}
-_RECIPES_OLD |= {"configs/recon/d3dgs_quick.yaml": "d3dgs/mlp", "configs/recon/e4dgs_quick.yaml": "e4dgs/mlp",
-                 "d3dgs_quick": "d3dgs/mlp", "e4dgs_quick": "e4dgs/mlp"}
-DEPRECATED: dict[str, tuple[str, str]] = {
-    **{f"configs/dataset_{p}.yaml": ("datasets", p) for p in ("tiny", "quick", "quick_realistic", "paper")},
-    **{f"configs/sim_{p}.yaml": ("sensors", p) for p in ("ideal", "realistic")},
-    **{old: ("recipes", new) for old, new in _RECIPES_OLD.items()},
-}
+# old name (a path relative to the repository, or a bare name) -> (kind, new name): common.deprecations
+DEPRECATED = CONFIG_NAMES
 
 
 _WARNED: set[str] = set()       # old names already reported in this process (one line each)
+
+
+class ShadowedName(ConfigWarning):
+    """A config name found in more than one search folder (printed as one `warning:` line)."""
+
+
+_SHADOWED: set[tuple[str, str]] = set()      # names already reported in this process
 
 
 class DeprecatedName(ConfigWarning, FutureWarning):
@@ -59,8 +58,8 @@ def shipped_names(kind: str) -> list[str]:
     return sorted(names)
 
 
-def deprecated_target(given: str | os.PathLike) -> tuple[str, str] | None:
-    """(kind, new name) for an old name or path (absolute paths inside the checkout too), else None."""
+def deprecated_key(given: str | os.PathLike) -> str | None:
+    """The registry's key of an old name or path (absolute paths inside the checkout too), else None."""
     text = str(given)
     path = Path(text)
     if path.is_absolute():
@@ -69,7 +68,15 @@ def deprecated_target(given: str | os.PathLike) -> tuple[str, str] | None:
         except ValueError:
             return None
     text = text.removeprefix("./")
-    return DEPRECATED.get(text) or (DEPRECATED.get(text.removesuffix(".yaml")) if "/" not in text else None)
+    if text in DEPRECATED:
+        return text
+    return text.removesuffix(".yaml") if "/" not in text and text.removesuffix(".yaml") in DEPRECATED else None
+
+
+def deprecated_target(given: str | os.PathLike) -> tuple[str, str] | None:
+    """(kind, new name) for an old name or path, else None."""
+    key = deprecated_key(given)
+    return DEPRECATED[key] if key is not None else None
 
 
 def find(kind: str, name: str | os.PathLike, method: str | None = None) -> Path | None:
@@ -85,7 +92,8 @@ def find(kind: str, name: str | os.PathLike, method: str | None = None) -> Path 
         found = find(new_kind, new)
         if found is not None and str(name) not in _WARNED:
             _WARNED.add(str(name))
-            warnings.warn(f"config {str(name)!r} is an old name (kept until 0.3): use {new!r} ({_rel(found)})",
+            warnings.warn(f"config {str(name)!r} is an old name (kept until {kept_until('config', deprecated_key(name))}): "
+                          f"use {new!r} ({_rel(found)})",
                           DeprecatedName, stacklevel=2)
         if found is not None:
             return found
@@ -96,11 +104,15 @@ def find(kind: str, name: str | os.PathLike, method: str | None = None) -> Path 
         return REPO / path.with_suffix(".yaml")
     if (REPO / path).is_file():
         return REPO / path                               # a checkout path given from another folder
-    for d in search_dirs(kind):
-        for c in ([d / method / f"{stem}.yaml"] if method and len(stem.parts) == 1 else []) + [d / f"{stem}.yaml"]:
-            if c.is_file():
-                return c
-    return None
+    matches = [c for d in search_dirs(kind)
+               for c in ([d / method / f"{stem}.yaml"] if method and len(stem.parts) == 1 else []) + [d / f"{stem}.yaml"]
+               if c.is_file()]
+    if len(matches) > 1 and (kind, str(name)) not in _SHADOWED:
+        _SHADOWED.add((kind, str(name)))
+        warnings.warn(f"config {str(name)!r} names {len(matches)} files: {_rel(matches[0])} is used, "
+                      f"{', '.join(_rel(m) for m in matches[1:])} is shadowed (the shipped configs come first, then "
+                      "E4DGS_CONFIG_PATH in order); give a path to use another", ShadowedName, stacklevel=2)
+    return matches[0] if matches else None
 
 
 def _rel(path: Path) -> str:

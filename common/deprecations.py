@@ -5,8 +5,8 @@
 
 Kinds: `module` (an old import path, an alias of the new module), `command` (an old `e4dgs`
 subcommand), `option` (an old option spelling, stored into the new one), `config` (an old config file
-name or path, common.config_files) and `bench preset` (benchmark.config). Each mechanism reads its
-names and its deprecation line's release from here; tests/common/test_deprecations.py fails once the
+name or path, resolved by common.config_files) and `bench preset` (benchmark.config). Each mechanism
+reads its names and its deprecation line's release from here; tests/common/test_deprecations.py fails once the
 toolkit's version reaches an entry's end, so its removal is not forgotten, and fails on an old name
 a mechanism accepts that is not registered.
 """
@@ -33,10 +33,26 @@ _OPTIONS = {"e4dgs bench --methods": "--cells", "e4dgs simulate --frames": "FRAM
             "e4dgs train --scene": "SCENE (first argument)", "e4dgs render --model": "MODEL (first argument)",
             "e4dgs e2vid --events": "EVENTS (first argument)", "e4dgs score --renders": "RENDERS (first argument)"}
 
+# old config name or path -> (kind, new name) (common.config_files resolves them)
+_RECIPES_OLD = {f"configs/recon/bench/{m}_quick.yaml": f"{m}/quick"
+                for m in ("d3dgs", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")}
+_RECIPES_OLD |= {f"bench/{m}_quick": f"{m}/quick" for m in ("d3dgs", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")}
+_RECIPES_OLD |= {"configs/recon/d3dgs_quick.yaml": "d3dgs/mlp", "configs/recon/e4dgs_quick.yaml": "e4dgs/mlp",
+                 "d3dgs_quick": "d3dgs/mlp", "e4dgs_quick": "e4dgs/mlp"}
+CONFIG_NAMES: dict[str, tuple[str, str]] = {
+    **{f"configs/dataset_{p}.yaml": ("datasets", p) for p in ("tiny", "quick", "quick_realistic", "paper")},
+    **{f"configs/sim_{p}.yaml": ("sensors", p) for p in ("ideal", "realistic")},
+    **{old: ("recipes", new) for old, new in _RECIPES_OLD.items()},
+}
+# old bench preset -> (preset, overrides of every cell) (benchmark.config)
+BENCH_PRESETS = {"paper_gpu": ("paper", {"train.device": "cuda", "train.backend": "gsplat"})}
+
 REGISTRY: tuple[Deprecated, ...] = (
     *(Deprecated("module", f"simulator.{m}", f"eventio.{m}") for m in _MOVED_TO_EVENTIO),
     Deprecated("command", "view", "draw-events"),
     *(Deprecated("option", old, new) for old, new in _OPTIONS.items()),
+    *(Deprecated("config", old, f"{kind}/{new}") for old, (kind, new) in CONFIG_NAMES.items()),
+    *(Deprecated("bench preset", old, new) for old, (new, _) in BENCH_PRESETS.items()),
 )
 
 

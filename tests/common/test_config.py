@@ -79,11 +79,13 @@ def test_dump_then_load_round_trip(tmp_path):
 def test_shipped_simulator_configs_load():
     from pathlib import Path
 
+    from simulator.sensor_presets import load_sensor, read_sensor
+
     files = sorted((Path(__file__).resolve().parents[2] / "configs" / "sensors").glob("*.yaml"))
-    assert len(files) >= 2
+    assert len(files) >= 5
     for f in files:
-        load_config(SimulatorConfig, f)
-    assert load_config(SimulatorConfig, files[0].with_name("ideal.yaml")) == SimulatorConfig()
+        load_sensor(f, tuple(read_sensor(f)[1]))          # with every effect it supplies
+    assert load_sensor(files[0].with_name("ideal.yaml")) == SimulatorConfig()
 
 
 def test_yaml_merge_keys_work_and_duplicates_are_still_refused(tmp_path):

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from common.config_files import DEPRECATED, DeprecatedName, _WARNED, find, search_dirs, shipped_names
+from common.config_files import ShadowedName, DEPRECATED, DeprecatedName, _WARNED, find, search_dirs, shipped_names
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -51,8 +51,29 @@ def test_the_config_path_adds_folders_after_the_shipped_ones(tmp_path, monkeypat
     (tmp_path / "datasets" / "quick.yaml").write_text("scenes: [cubes]\n")      # never shadows a shipped one
     monkeypatch.setenv("E4DGS_CONFIG_PATH", str(tmp_path))
     assert find("datasets", "mine") == tmp_path / "datasets" / "mine.yaml"
-    assert find("datasets", "quick") == REPO / "configs/datasets/quick.yaml"
+    with pytest.warns(ShadowedName, match=r"'quick' names 2 files: configs/datasets/quick.yaml is used, .*datasets/"
+                                          r"quick.yaml is shadowed"):
+        assert find("datasets", "quick") == REPO / "configs/datasets/quick.yaml"
     assert "mine" in shipped_names("datasets")
+
+
+def test_a_users_sensor_shadowed_by_a_shipped_one_is_named_on_the_command_line(tmp_path, monkeypatch, capsys):
+    from e4dgs.cli import main
+    from common.config_files import _SHADOWED
+    from common.imageio import write_png
+    import numpy as np
+
+    _SHADOWED.clear()
+    (tmp_path / "sensors").mkdir()
+    (tmp_path / "sensors" / "ideal.yaml").write_text("pos_threshold: 0.5\nneg_threshold: 0.5\n")
+    monkeypatch.setenv("E4DGS_CONFIG_PATH", str(tmp_path))
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for k in range(3):
+        write_png(frames / f"{k:03d}.png", np.full((4, 5, 3), 0.2 + 0.2 * k))
+    assert main(["simulate", str(frames), "--fps", "1000", "--out", str(tmp_path / "e.h5"), "--config", "ideal"]) == 0
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("warning:")]
+    assert len(err) == 1 and "configs/sensors/ideal.yaml is used" in err[0] and str(tmp_path) in err[0], err
 
 
 def test_an_old_command_line_config_name_prints_one_deprecation_line(tmp_path, capsys):

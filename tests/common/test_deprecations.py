@@ -16,7 +16,7 @@ def _version(text: str) -> tuple[int, ...]:
     return tuple(int(v) for v in re.findall(r"\d+", text)[:3])
 
 
-@pytest.mark.parametrize("kind", ["module", "command", "option"])
+@pytest.mark.parametrize("kind", ["module", "command", "option", "config", "bench preset"])
 def test_no_old_name_outlives_its_release(kind):
     entries = registered(kind)
     assert entries, kind
@@ -56,3 +56,10 @@ def test_a_registered_name_past_its_end_fails(monkeypatch):
     with pytest.raises(AssertionError, match="remove it"):
         test_no_old_name_outlives_its_release("module")
     assert len(REGISTRY) >= 11
+
+
+def test_the_config_and_preset_mechanisms_read_the_registry():
+    from benchmark.config import RENAMED_PRESETS
+    from common.config_files import DEPRECATED
+
+    assert set(DEPRECATED) == set(registered("config")) and set(RENAMED_PRESETS) == set(registered("bench preset"))
