@@ -90,6 +90,32 @@ def read_json(path: Path, raw: bytes | None = None):
         raise DatasetError(f"{path}: not valid JSON ({exc}); the file is damaged (`e4dgs check` verifies the scene)") from None
 
 
+# the fields of a transforms file's frame and what each must be
+_FRAME_FIELDS = {"camera": (int, "a camera index"), "index": (int, "a kept-frame index"),
+                 "timestamp_us": (int, "microseconds"), "time": ((int, float), "a time in [0, 1]"),
+                 "file_path": (str, "a frame path")}
+
+
+def _checked_frames(path: Path, doc, n_cameras: int) -> list[dict]:
+    """A transforms file's frames, each with its fields of the right type; DatasetError naming the
+    file, the frame and the field otherwise (a hand-edited file must not end in a TypeError)."""
+    frames = doc.get("frames") if isinstance(doc, dict) else None
+    if not isinstance(frames, list):
+        raise DatasetError(f"{path}: frames: expected a list of frames, got {type(frames).__name__}")
+    for i, f in enumerate(frames):
+        if not isinstance(f, dict):
+            raise DatasetError(f"{path}: frames[{i}]: expected a mapping of its fields, got {type(f).__name__}")
+        for key, (kind, what) in _FRAME_FIELDS.items():
+            v = f.get(key)
+            if v is None or isinstance(v, bool) or not isinstance(v, kind):
+                raise DatasetError(f"{path}: frames[{i}].{key}: expected {what}, got {v!r}")
+        if not 0 <= f["camera"] < n_cameras:
+            raise DatasetError(f"{path}: frames[{i}].camera: {f['camera']} is not one of the scene's {n_cameras} cameras")
+        if "gray_path" in f and not isinstance(f["gray_path"], str):
+            raise DatasetError(f"{path}: frames[{i}].gray_path: expected a frame path, got {f['gray_path']!r}")
+    return frames
+
+
 class SceneDataset:
     def __init__(self, scene_dir: str | Path):
         self.dir = Path(scene_dir)
@@ -119,7 +145,7 @@ class SceneDataset:
         if not path.exists():
             raise DatasetError(f"{path}: missing")
         frames = []
-        for f in read_json(path)["frames"]:
+        for f in _checked_frames(path, read_json(path), self.n_cameras):
             gray = self._frame_path(path, f["gray_path"]) if "gray_path" in f else None
             exposure = blur.get((f["camera"], f["index"])) if blur else None
             frames.append(FrameRecord(f["camera"], f["index"], int(f["timestamp_us"]), float(f["time"]),

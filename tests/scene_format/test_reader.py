@@ -1,5 +1,6 @@
 """The scene folder's reader: the frozen description reconstruction reads."""
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -19,3 +20,34 @@ def test_the_description_holds_what_reconstruction_reads_and_is_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
         d.kind = "object"
     assert all(isinstance(c, float) for c in d.background_linear) and np.isfinite(d.background_linear).all()
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda t: t.update(frames=5), "frames: expected a list of frames, got int"),
+    (lambda t: t["frames"][1].update(camera="0"), "frames[1].camera: expected a camera index, got '0'"),
+    (lambda t: t["frames"][0].update(camera=9), "frames[0].camera: 9 is not one of the scene's"),
+    (lambda t: t["frames"][0].pop("file_path"), "frames[0].file_path: expected a frame path, got None"),
+    (lambda t: t["frames"].__setitem__(0, 7), "frames[0]: expected a mapping of its fields, got int"),
+], ids=["frames-number", "camera-text", "camera-range", "no-file", "frame-number"])
+def test_a_hand_edited_transforms_file_is_refused_naming_the_field(gt_scene, tmp_path, edit, words, capsys):
+    """A number where a list belongs, a text where an index belongs: DatasetError from the reader and
+    one line from the commands that read the split (testviews, train), never a TypeError."""
+    import json
+    import shutil
+
+    from e4dgs.cli import main
+    from scene_format.reader import DatasetError, SceneDataset
+
+    scene = tmp_path / "data" / "cubes"
+    shutil.copytree(gt_scene, scene)
+    doc = json.loads((scene / "transforms_test.json").read_text())
+    edit(doc)
+    (scene / "transforms_test.json").write_text(json.dumps(doc))
+    with pytest.raises(DatasetError, match=re.escape(words)):
+        SceneDataset(scene).frames("test")
+    try:
+        rc = main(["testviews", str(scene), "--out", str(tmp_path / "views")])
+    except SystemExit as exc:
+        rc, _ = 1, print(exc.code, file=__import__("sys").stderr)
+    err = capsys.readouterr().err
+    assert rc == 1 and words in err and "internal error" not in err, err
