@@ -108,7 +108,8 @@ class Readout:
             events = events.copy()
             events["t"] = arrival_times_us(events["t"], c.latency_us, c.latency_jitter_us, self.rng)
         pool = np.concatenate([self.pending, events]) if self.pending.size else events
-        pool = pool[np.argsort(pool["t"], kind="stable")]
+        if c.latency_jitter_us > 0:     # without jitter the arrivals keep the pixels' order (pending ones first)
+            pool = pool[np.argsort(pool["t"], kind="stable")]
         n_ready = int(np.searchsorted(pool["t"], t_now_us, side="right"))   # every later event arrives after t_now
         self.pending = pool[n_ready:]
         self._serve(pool[:n_ready])
