@@ -159,3 +159,19 @@ def test_the_tests_mirror_the_packages():
     folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and not p.name.startswith((".", "__"))}
     assert folders and folders <= set(LAYERS) | {"fixtures"}, sorted(folders - set(LAYERS))
     assert sorted(p.name for p in (ROOT / "tests").glob("test_*.py")) == ["test_architecture.py", "test_docs.py"]
+
+
+def test_reading_a_scene_or_drawing_events_loads_no_simulator_kernel():
+    """A scene's config holds a sensor's config, and the viewer draws events: neither imports the
+    simulator's numba kernels (simulator/__init__ loads them on first use of EventSimulator)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, scene_format, scene_format.reader, recon.event_windows, viewer, datagen.preview\n"
+            "loaded = [m for m in ('simulator.simulator', 'simulator.kernels', 'simulator.kernel_ref', 'simulator.noise',"
+            " 'simulator.readout') if m in sys.modules]\n"
+            "assert not loaded, loaded\n"
+            "from simulator import EventSimulator\n"
+            "assert 'simulator.kernels' in sys.modules\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
