@@ -2,13 +2,15 @@
 
 A method is a class with `name`, `config_cls` (its typed config dataclass, which has a `train:
 TrainConfig` field), `inputs` (what it sees: "rgb", "events") and the hooks the shared trainer calls
-(see `recon.method.Method`). The bundled methods add themselves with `@register`. A method in
-another package is a plug-in: it names its class in the entry-point group `e4dgs.methods`
+(see `recon.method.Method`). Every method, bundled or not, is named in the entry-point group
+`e4dgs.methods` (the bundled ones in this project's pyproject.toml, BUNDLED below when the package's
+metadata is absent, e.g. a checkout not installed); a plug-in in another package does the same
 
     [project.entry-points."e4dgs.methods"]
     my_method = "my_package.method:MyMethod"
 
-and is then trained, rendered and benched like a bundled one (docs/guides/your_method.md).
+and is then trained, rendered and benched like a bundled one (docs/guides/your_method.md). A method is
+loaded when it is first asked for by name, so a plug-in that fails to import fails only for itself.
 """
 from __future__ import annotations
 
@@ -19,9 +21,10 @@ METHODS: dict[str, type] = {}
 ENTRY_POINT_GROUP = "e4dgs.methods"
 INPUTS = ("rgb", "events")
 
-# modules that register methods when imported
-_MODULES = ("recon.methods.d3dgs", "recon.methods.e4dgs", "recon.methods.e2vid_d3dgs", "recon.methods.deblur_d3dgs")
-_plugins_loaded = False
+# the bundled methods' entry points (pyproject.toml declares the same; a test holds them equal)
+BUNDLED = {"d3dgs": "recon.methods.d3dgs:D3DGS", "deblur_d3dgs": "recon.methods.deblur_d3dgs:DeblurD3DGS",
+           "e2vid_d3dgs": "recon.methods.e2vid_d3dgs:E2VIDD3DGS", "e4dgs": "recon.methods.e4dgs:E4DGS",
+           "e4dgs_rgb": "recon.methods.e4dgs:E4DGSRGB"}
 
 
 class PluginError(ValueError):
@@ -51,37 +54,49 @@ def register(cls: type) -> type:
     return cls
 
 
-def _load_plugins() -> None:
-    """Register every method named in the entry-point group (once per process)."""
-    global _plugins_loaded
-    if _plugins_loaded:
-        return
-    _plugins_loaded = True
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        where = f"method plug-in {ep.name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})"
-        try:
-            cls = ep.load()
-        except Exception as exc:  # noqa: BLE001 - any import failure of someone else's package, in one line
-            raise PluginError(f"{where}: cannot be imported: {type(exc).__name__}: {exc}") from None
-        check_method(cls, where)
-        if cls.name != ep.name:
-            raise PluginError(f"{where}: the entry point's name must be the method's name {cls.name!r}")
-        register(cls)
+class _Bundled:
+    """An entry point of a bundled method, for a checkout whose package metadata is absent."""
+
+    def __init__(self, name: str, value: str):
+        self.name, self.value = name, value
+
+    def load(self):
+        module, _, attr = self.value.partition(":")
+        return getattr(importlib.import_module(module), attr)
 
 
-def _load_all() -> None:
-    for mod in _MODULES:
-        importlib.import_module(mod)
-    _load_plugins()
+def _entry_points() -> dict:
+    """{method name: entry point}: the group's, and the bundled ones its metadata lacks."""
+    found = {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    return {**{n: _Bundled(n, v) for n, v in BUNDLED.items() if n not in found}, **found}
+
+
+def _load(name: str, ep) -> type:
+    """Load, check and register the method of one entry point; PluginError naming it."""
+    bundled = ep.value in BUNDLED.values()
+    where = (f"method {name!r} ({ep.value})" if bundled
+             else f"method plug-in {name!r} ({ep.value}, entry point group {ENTRY_POINT_GROUP})")
+    try:
+        cls = ep.load()
+    except Exception as exc:  # noqa: BLE001 - any import failure of someone else's package, in one line
+        raise PluginError(f"{where}: cannot be imported: {type(exc).__name__}: {exc}") from None
+    check_method(cls, where)
+    if cls.name != name:
+        raise PluginError(f"{where}: the entry point's name must be the method's name {cls.name!r}")
+    return register(cls)
 
 
 def get_method(name: str) -> type:
-    _load_all()
+    """The method class of `name`, loaded on first use; ValueError for an unknown name, PluginError for
+    one whose entry point cannot be loaded (other methods are not affected)."""
     if name not in METHODS:
-        raise ValueError(f"unknown method {name!r}; registered methods: {', '.join(sorted(METHODS))}")
+        ep = _entry_points().get(name)
+        if ep is None:
+            raise ValueError(f"unknown method {name!r}; registered methods: {', '.join(method_names())}")
+        _load(name, ep)
     return METHODS[name]
 
 
 def method_names() -> list[str]:
-    _load_all()
-    return sorted(METHODS)
+    """Every method's name: the entry points' and any registered in this process (none loaded)."""
+    return sorted(set(_entry_points()) | set(METHODS))

@@ -90,12 +90,15 @@ class _EP:
     (ImportError("No module named 'pkg'"), "cannot be imported: ImportError: No module named 'pkg'"),
     (dict, "expected a subclass of recon.method.Method"),
 ])
-def test_a_broken_plugin_is_refused_naming_its_entry_point(monkeypatch, obj, words):
-    monkeypatch.setattr(registry, "_plugins_loaded", False)
+def test_a_broken_plugin_is_refused_naming_its_entry_point_and_breaks_no_other_method(monkeypatch, obj, words):
     monkeypatch.setattr(registry, "entry_points", lambda group: [_EP("broken", obj)])
+    monkeypatch.setattr(registry, "METHODS", {})
     with pytest.raises(registry.PluginError, match="method plug-in 'broken'") as exc:
-        registry.get_method("d3dgs")
+        registry.get_method("broken")
     assert words in str(exc.value)
+    assert set(registry.BUNDLED) <= set(registry.method_names()) and "broken" in registry.method_names()
+    for name in registry.BUNDLED:                # the five bundled methods load without the plug-in
+        assert registry.get_method(name).name == name
 
 
 def test_a_plugin_whose_name_differs_from_its_entry_point_or_lacks_inputs_is_refused(monkeypatch):
@@ -110,11 +113,24 @@ def test_a_plugin_whose_name_differs_from_its_entry_point_or_lacks_inputs_is_ref
 
     for cls, ep_name, words in ((NoInputs, "no_inputs", "inputs must name what the method sees"),
                                 (Renamed, "mine", "the entry point's name must be the method's name 'other'")):
-        monkeypatch.setattr(registry, "_plugins_loaded", False)
         monkeypatch.setattr(registry, "entry_points", lambda group, c=cls, n=ep_name: [_EP(n, c)])
         with pytest.raises(registry.PluginError, match=words):
-            registry.method_names()
+            registry.get_method(ep_name)
     assert "no_inputs" not in registry.METHODS and "other" not in registry.METHODS
+
+
+def test_the_bundled_methods_are_entry_points_of_the_package():
+    """pyproject.toml declares the bundled methods in the group, as BUNDLED says; the installed
+    metadata lists them (a checkout not installed falls back on BUNDLED)."""
+    import re
+    from importlib.metadata import entry_points
+
+    text = (ROOT / "pyproject.toml").read_text()
+    block = text.split('[project.entry-points."e4dgs.methods"]', 1)[1].split("\n[", 1)[0]
+    declared = dict(re.findall(r'^(\w+) = "([\w.:]+)"', block, re.M))
+    assert declared == registry.BUNDLED
+    installed = {ep.name: ep.value for ep in entry_points(group=registry.ENTRY_POINT_GROUP)}
+    assert {k: v for k, v in installed.items() if k in declared} == declared
 
 
 def test_a_plugin_whose_step_raises_is_named(motion_scene, tmp_path, monkeypatch):
