@@ -27,7 +27,8 @@ SCENE_NAMES = ("lego", "rubiks_cube", "mc_toy", "hinge", "cubes", "capsule", "re
 class PresetConfig:
     scenes: tuple[str, ...] = SCENE_NAMES
     overrides: dict[str, Any] = field(default_factory=dict)  # merged into every scene's YAML
-    scene_overrides: dict[str, dict[str, Any]] = field(default_factory=dict)  # then into one scene's
+    # per scene, merged after `overrides` into that scene's YAML: {scene: {key: value}}
+    scene_overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def __post_init__(self):
         for name in self.scene_overrides:

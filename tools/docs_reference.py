@@ -94,7 +94,9 @@ def _default(f: dataclasses.Field) -> str:
     return f"`{value!r}`" if not isinstance(value, str) else f"`{value}`"
 
 
-def config_rows(cls, prefix: str = "") -> list[str]:
+def config_rows(cls, prefix: str = "", shared: dict | None = None, where: str = "") -> list[str]:
+    """The rows of a config class and its nested ones. `shared` ({nested class: the section that lists it}):
+    a nested class listed once already (the methods' `train`) is referred to, not printed again."""
     hints = typing.get_type_hints(cls)
     comments = field_comments(cls)
     bounds = getattr(cls, "BOUNDS", {})
@@ -105,14 +107,38 @@ def config_rows(cls, prefix: str = "") -> list[str]:
         if f.name in bounds:
             lo, hi, why = bounds[f.name]
             what = (what + " " if what else "") + f"(range {lo} to {hi}: {why})"
-        if dataclasses.is_dataclass(tp):
+        if dataclasses.is_dataclass(tp) and shared is not None and tp in shared:
+            first, first_default = shared[tp]
+            differ = _flat_diff(first_default, _field_default(f))
+            note = f"; defaults that differ here: {differ}" if differ else ""
+            rows.append(f"| `{prefix}{f.name}.*` | {tp.__name__} | | {what + ' ' if what else ''}the same fields as "
+                        f"`{f.name}.*` under {first}{note} |")
+        elif dataclasses.is_dataclass(tp):
             nested.append((f.name, tp))
+            if shared is not None and prefix == "":
+                shared[tp] = (where, _field_default(f))
             rows.append(f"| `{prefix}{f.name}` | {tp.__name__} | (below) | {what} |")
         else:
             rows.append(f"| `{prefix}{f.name}` | `{_type_name(tp)}` | {_default(f)} | {what} |")
     for name, tp in nested:
         rows += config_rows(tp, f"{prefix}{name}.")
     return rows
+
+
+def _field_default(f: dataclasses.Field):
+    """A field's default value (built by its factory)."""
+    return f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
+
+
+def _flat_diff(a, b, prefix: str = "") -> str:
+    """'key value, ...' of the leaves where config value b differs from a (dotted keys)."""
+    from common.config import to_dict
+
+    da, db = (to_dict(v) if dataclasses.is_dataclass(v) else v for v in (a, b))
+    if isinstance(da, dict) and isinstance(db, dict):
+        parts = [_flat_diff(da[k], db[k], f"{prefix}{k}.") for k in da if k in db]
+        return ", ".join(p for p in parts if p)
+    return f"`{prefix.rstrip('.')}` {db!r}" if da != db else ""
 
 
 def _doc(cls) -> str:
@@ -170,10 +196,11 @@ def config_page() -> str:
                 ("Leaderboard preset (`configs/bench/`)", BenchConfig)]
     sections += [(f"Method `{m}` (`configs/recipes/{m}/`)", get_method(m).config_cls) for m in method_names()
                  if get_method(m).__module__.startswith("recon.")]
+    shared: dict = {}             # a methods' nested table (train, ...) is listed under the first method only
     for title, cls in sections:
         out += ["", f"## {title}", "", f"`{cls.__module__}.{cls.__name__}`. {_doc(cls)}", "",
                 "| Key | Type | Default | What it is |", "|---|---|---|---|"]
-        out += config_rows(cls)
+        out += config_rows(cls, shared=shared if title.startswith("Method") else None, where=title.split(" (")[0])
     return "\n".join(out) + "\n"
 
 
