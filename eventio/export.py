@@ -74,6 +74,13 @@ def parse_seconds(text: str) -> int:
 def read_e2vid_txt(path: str | os.PathLike) -> EventStream:
     """An E2VID text file; ValueError naming the file (and the line) for anything else."""
     path = Path(path)
+    try:
+        return _read_e2vid_txt(path)
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not an E2VID event text file (not text: {path.read_bytes()[:8]!r}...)") from None
+
+
+def _read_e2vid_txt(path: Path) -> EventStream:
     with open(path) as fh:
         header = fh.readline().split()
         if len(header) != 2 or not all(v.isdigit() and int(v) > 0 for v in header):
@@ -129,10 +136,23 @@ def write_npz(path: str | os.PathLike, stream: EventStream) -> Path:
 def read_npz(path: str | os.PathLike) -> EventStream:
     """An .npz of arrays t (integer microseconds), x, y, p (+1 / -1, or 1 / 0), width, height; a
     column of another kind (float seconds, negative pixels, other polarities) is refused by name."""
+    import zipfile
+
     path = Path(path)
-    with np.load(path) as z:
-        cols = {k: np.asarray(z[k]) for k in ("t", "x", "y", "p")}
-        width, height = (np.asarray(z[k]) for k in ("width", "height"))
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not hasattr(z, "files"):
+            raise ValueError("a single array, not an archive of named arrays")
+        with z:
+            missing = [k for k in ("t", "x", "y", "p", "width", "height") if k not in z.files]
+            if missing:
+                raise ValueError(f"no array {', '.join(missing)} (it has {', '.join(z.files) or 'none'})")
+            cols = {k: np.asarray(z[k]) for k in ("t", "x", "y", "p")}
+            width, height = (np.asarray(z[k]) for k in ("width", "height"))
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not an .npz event file ({' '.join(str(exc).split())[:160]})") from None
     for name in ("width", "height"):
         v = {"width": width, "height": height}[name]
         if v.shape != () or v.dtype.kind not in "iu" or int(v) <= 0:

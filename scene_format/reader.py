@@ -190,8 +190,15 @@ class SceneDataset:
             raise DatasetError(f"{p}: missing or not a single-channel mask image (`e4dgs masks --force` writes it again)")
         return m > 127
 
+    def _index(self, what: str, value, count: int, where: str) -> int:
+        """An integer index 0 .. count - 1 (bools and floats are not indices), else DatasetError."""
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or not 0 <= int(value) < count:
+            raise DatasetError(f"{self.dir}: {where}: {what} {value!r}: expected an integer 0 to {count - 1}")
+        return int(value)
+
     def event_file(self, camera: int) -> Path:
-        return self.dir / "events" / f"cam{camera}.h5"
+        """The event file of a camera (DatasetError for a camera the scene does not have)."""
+        return self.dir / "events" / f"cam{self._index('camera', camera, self.n_cameras, 'event file')}.h5"
 
     @property
     def kept_times_us(self) -> np.ndarray:
@@ -228,12 +235,8 @@ class SceneDataset:
         if not kinds:
             raise DatasetError(f"{self.dir}: no ground truth (generate it with `ground_truth: [depth, flow, normals, "
                                "ids]` in the scene's or the preset's config)")
-        n_kept = len(self.kept_times_us)
-        for what, value, count in (("camera", camera, self.n_cameras), ("kept frame", index, n_kept)):
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
-                    or not 0 <= int(value) < count:
-                raise DatasetError(f"{self.dir}: ground truth: {what} {value!r}: expected an integer 0 to {count - 1}")
-        camera, index = int(camera), int(index)
+        camera = self._index("camera", camera, self.n_cameras, "ground truth")
+        index = self._index("kept frame", index, len(self.kept_times_us), "ground truth")
         root, name = self.dir / "ground_truth", f"cam{camera}/{index:05d}"
         gt = self.manifest["ground_truth"]
         source = self.dir.parent / gt["shared_with"] / "ground_truth" if gt.get("shared_with") else root
@@ -279,7 +282,7 @@ class SceneDataset:
 
     def pose(self, camera: int, t_us) -> np.ndarray:
         """OpenCV camera-to-world [4, 4] of a camera at any time inside the clip."""
-        return self.cameras[camera].pose_at(t_us)
+        return self.cameras[self._index("camera", camera, self.n_cameras, "pose")].pose_at(t_us)
 
     @staticmethod
     def load_image(path: Path) -> np.ndarray:
