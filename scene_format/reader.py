@@ -265,7 +265,7 @@ class SceneDataset:
                 raise DatasetError(f"{path}: not a one-channel id image")
             out["ids"] = ids
         if "flow" in kinds:
-            if index < n_kept - 1:                      # every kept frame but the last
+            if index < len(self.kept_times_us) - 1:                      # every kept frame but the last
                 forward = need(root / "flow" / f"{name}.npz")
                 try:
                     with np.load(forward) as z:
