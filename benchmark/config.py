@@ -36,8 +36,8 @@ class BlurStudy:
     one of the scene's exposure levels, set through the config field its method names
     (Method.blur_level_field), and events-only methods are not re-run."""
     scene: str = ""                       # "" : no blur study
-    levels: tuple[str, ...] = ("mild", "medium", "strong")
-    cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+    levels: tuple[str, ...] = ("mild", "medium", "strong")  # the blur levels the study trains at
+    cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")  # the cells the study trains
 
 
 @dataclass(frozen=True)
@@ -47,11 +47,11 @@ class SpeedStudy:
     every speed) is the reference line. `sensor_scene` is also run with the speed variants of a
     realistic sensor (`sensor_dataset`, a dataset preset whose scene declares one)."""
     scenes: tuple[str, ...] = ()          # () : no speed study
-    speeds: tuple[float, ...] = ()
-    cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+    speeds: tuple[float, ...] = ()  # the speed factors swept (speed variants of the dataset)
+    cells: tuple[str, ...] = ("d3dgs_blur", "deblur_d3dgs", "e2vid_d3dgs", "e4dgs", "e4dgs_rgb")  # the cells the study trains
     sensor_dataset: str = ""              # "" : no realistic-sensor run
     sensor_scene: str = ""                # the scene run on it ("": the first of `scenes`)
-    sensor_cells: tuple[str, ...] = ("e2vid_d3dgs", "e4dgs", "e4dgs_rgb")
+    sensor_cells: tuple[str, ...] = ("e2vid_d3dgs", "e4dgs", "e4dgs_rgb")  # the cells swept on sensor_dataset
     lpips: bool = False                   # its tables read PSNR: its own runs skip LPIPS unless asked
     reference: str = "d3dgs_sharp"        # the cell drawn as the reference line (trained at speed 1)
     rgb_reference: str = "d3dgs_blur"     # the RGB cell the event cells must overtake (crossing speeds)
@@ -68,8 +68,8 @@ class SpeedStudy:
 @dataclass(frozen=True)
 class AblationStudy:
     scene: str = ""                       # "" : no ablation
-    base: str = "e4dgs"
-    switches: dict[str, dict[str, Any]] = field(default_factory=lambda: {
+    base: str = "e4dgs"  # the cell the ablation switches parts of
+    switches: dict[str, dict[str, Any]] = field(default_factory=lambda: {  # variant name -> the overrides it switches
         "w/o TV": {"events.lambda_tv": 0.0}, "w/o ESS": {"events.ess": False},
         "w/o AES": {"events.aes": False}, "w/o IIP": {"events.iip": False}})
     # training seeds (train.seed) of every variant and of the full method; the table gives their mean
@@ -84,17 +84,17 @@ class AblationStudy:
 @dataclass(frozen=True)
 class BenchConfig:
     dataset: str = "quick"               # data/<dataset>, generated with `e4dgs dataset --preset <dataset>`
-    scenes: tuple[str, ...] = ("lego",)
-    cells: dict[str, CellSpec] = field(default_factory=dict)
-    blur: BlurStudy = field(default_factory=BlurStudy)
-    ablation: AblationStudy = field(default_factory=AblationStudy)
-    speed: SpeedStudy = field(default_factory=SpeedStudy)
+    scenes: tuple[str, ...] = ("lego",)  # the dataset's scenes the leaderboard covers
+    cells: dict[str, CellSpec] = field(default_factory=dict)  # the leaderboard's rows: {cell: {method, config, label, overrides, speed}}
+    blur: BlurStudy = field(default_factory=BlurStudy)  # the blur study (off without a scene)
+    ablation: AblationStudy = field(default_factory=AblationStudy)  # the E-4DGS ablation (off without a scene)
+    speed: SpeedStudy = field(default_factory=SpeedStudy)  # the speed study (off without scenes)
     # blur levels as motion speeds (factors of the dataset's speed variants): {mild: s1, medium: s2, ...}
     speed_levels: dict[str, float] = field(default_factory=dict)
     # per-scene changes to a cell, on top of its overrides and under a study's own, e.g. the budget that
     # gives every cell the same training seconds on a slower scene: {scene: {cell: {dotted key: value}}}
     scene_overrides: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
-    lpips_net: str = "vgg"
+    lpips_net: str = "vgg"  # LPIPS's network: vgg or alex
     # seeds of every main cell (0 .. seeds-1; `e4dgs bench --seeds N`): the tables give the mean and
     # spread over them, and call differences within the spread ties
     seeds: int = 1
@@ -112,7 +112,7 @@ class BenchConfig:
     # holds no cell of its kind at two seeds or more: {cell: {psnr: dB, ssim: ..., lpips: ...}}
     seed_spread: dict[str, dict[str, float]] = field(default_factory=dict)
     snapshot_metrics: tuple[str, ...] = ("psnr", "ssim")    # at 10/25/50 % (the final model gets all)
-    description: str = ""
+    description: str = ""  # what the preset measures (printed above its tables)
 
     def __post_init__(self):
         if not self.cells:

@@ -25,7 +25,7 @@ SCENE_NAMES = ("lego", "rubiks_cube", "mc_toy", "hinge", "cubes", "capsule", "re
 
 @dataclass(frozen=True)
 class PresetConfig:
-    scenes: tuple[str, ...] = SCENE_NAMES
+    scenes: tuple[str, ...] = SCENE_NAMES  # the scenes the preset generates
     overrides: dict[str, Any] = field(default_factory=dict)  # merged into every scene's YAML
     # per scene, merged after `overrides` into that scene's YAML: {scene: {key: value}}
     scene_overrides: dict[str, dict[str, Any]] = field(default_factory=dict)

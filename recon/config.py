@@ -41,8 +41,8 @@ class InitConfig:
     renders no contrast at all and every contrast it ends with was learned (docs/design/e4dgs.md).
     `carve_fallback`: where the carving keeps no point (too few events agree between the cameras),
     `auto` starts from the auto volume instead, recorded in run.json's `init_fallback`; `error` stops."""
-    kind: Literal["auto", "cube", "sphere", "points", "events"] = "auto"
-    color: Literal["mid", "background"] = "mid"
+    kind: Literal["auto", "cube", "sphere", "points", "events"] = "auto"  # where the initial points lie (the class note)
+    color: Literal["mid", "background"] = "mid"  # the initial points' colour: mid-grey or the empty background's
     n_points_object: int = 100_000
     n_points_room: int = 200_000
     cube_half_size: float | None = None
@@ -55,7 +55,7 @@ class InitConfig:
     carve_window: float = 0.01      # quick hinge, untrained model: 0.1 / 3 px 27.99 dB, 0.03 / 2 px 28.37,
     carve_min_events: int = 2       # 0.01 / 1 px 28.72 (the shorter the window, the less the motion
     carve_dilate_px: int = 1        # smears the silhouettes; docs/design/e4dgs.md)
-    carve_fallback: Literal["auto", "error"] = "auto"
+    carve_fallback: Literal["auto", "error"] = "auto"  # where carving keeps no point: start from the auto volume, or stop
 
     def __post_init__(self):
         check_positive(self, "n_points_object", "n_points_room", "carve_candidates", "carve_times",
@@ -96,7 +96,7 @@ class LearningRates:
 @dataclass(frozen=True)
 class DensifyConfig:
     """3DGS adaptive density control. Iteration numbers are for the 40k reference budget."""
-    enabled: bool = True
+    enabled: bool = True  # clone, split and prune Gaussians during training
     start: int = 500
     stop: int = 15_000
     interval: int = 100
@@ -105,7 +105,7 @@ class DensifyConfig:
     min_opacity: float = 0.005
     max_screen_size: float = 20.0    # pixels; applied after the first opacity reset
     max_world_size: float = 0.1      # fraction of the scene extent
-    opacity_reset: bool = True
+    opacity_reset: bool = True  # reset every opacity every opacity_reset_interval iterations
     opacity_reset_interval: int = 3000
     max_gaussians: int = 1_000_000   # no densification beyond this count
 
@@ -119,7 +119,7 @@ class DeformFieldConfig:
     means' rate, decaying after the warm-up as the MLP's rate does. `smoothness` weighs a temporal
     smoothness term added to the loss while the trajectories are on: the mean acceleration energy of
     the position offsets over the clip, in units of the scene's extent (recon.trajectory); 0 is off."""
-    kind: Literal["mlp", "trajectory"] = "mlp"
+    kind: Literal["mlp", "trajectory"] = "mlp"  # the paper's deformation MLP, or per-Gaussian trajectories
     degree: int = 3
     fourier: int = 2
     lr_scale: float = 1.0
@@ -148,8 +148,8 @@ class CoarseToFineConfig:
     """Render and supervise at reduced resolution first (recon.coarse): factors[k] (an integer >= 2,
     decreasing) until the fraction until[k] of the run (increasing, in (0, 1]), then full resolution.
     Empty (the default): full resolution throughout. Example: factors [4, 2], until [0.2, 0.5]."""
-    factors: tuple[int, ...] = ()
-    until: tuple[float, ...] = ()
+    factors: tuple[int, ...] = ()  # downscale factors, decreasing (e.g. [4, 2])
+    until: tuple[float, ...] = ()  # the fraction of the run each factor lasts until, increasing
 
     def __post_init__(self):
         if len(self.factors) != len(self.until):
@@ -187,21 +187,21 @@ class Schedule:
 class TrainConfig:
     """What every method's trainer shares: budget, schedule, checkpoints, evaluation."""
     iterations: int = 40_000
-    scale_schedule: bool = True
+    scale_schedule: bool = True  # scale the schedule's iteration counts to this run's iterations
     # the budget the schedule's iteration counts below are written for; with scale_schedule they are
     # scaled by iterations / schedule_reference (a recipe written for 750 iterations, run for 420)
     schedule_reference: int = REFERENCE_ITERATIONS
     deform: bool = True               # false: a static 3DGS (no deformation field is ever applied)
-    deform_field: DeformFieldConfig = field(default_factory=DeformFieldConfig)
-    coarse_to_fine: CoarseToFineConfig = field(default_factory=CoarseToFineConfig)
+    deform_field: DeformFieldConfig = field(default_factory=DeformFieldConfig)  # what deforms the Gaussians over time
+    coarse_to_fine: CoarseToFineConfig = field(default_factory=CoarseToFineConfig)  # reduced resolution first
     warm_up: int = 3000               # deformation off before this (reference iterations)
     position_lr_steps: int = 30_000
     deform_lr_steps: int = 40_000
     sh_degree: int = 3
     sh_interval: int = 1000           # one more SH degree every this many (reference) iterations
-    lr: LearningRates = field(default_factory=LearningRates)
-    densify: DensifyConfig = field(default_factory=DensifyConfig)
-    init: InitConfig = field(default_factory=InitConfig)
+    lr: LearningRates = field(default_factory=LearningRates)  # learning rates
+    densify: DensifyConfig = field(default_factory=DensifyConfig)  # adaptive density control
+    init: InitConfig = field(default_factory=InitConfig)  # the initial points
     background: tuple[float, float, float] | None = None   # None: the scene's empty-background colour
     # the deformation MLP's arithmetic: auto measures this machine once and takes the faster of
     # float32 and bfloat16 autocast (recon.precision; bf16 is 2-3x faster on cores with native bf16,

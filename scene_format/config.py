@@ -22,7 +22,7 @@ class RenderConfig:
     adaptive_px: 0 renders every frame of the fps time line; > 0 renders only the frames the image
     motion needs, at most adaptive_px of motion (p99 of the scene's surface points) between two rendered
     frames and at most max_stride frames apart, the kept frames always (datagen.temporal_sampling)."""
-    engine: Literal["workbench", "cycles", "eevee"] = "workbench"
+    engine: Literal["workbench", "cycles", "eevee"] = "workbench"  # Blender's renderer: workbench (rasteriser, noise-free), cycles or eevee
     samples: int = 8
     fps: float = 3000.0
     width: int = 346
@@ -80,12 +80,12 @@ class CameraRigConfig:
     n_cameras: int = 6
     radius: float = 4.0
     height: float = 1.5
-    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    target: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the point every camera looks at (scene units)
     azimuth0_deg: float = 0.0
     sweep_deg: float = 30.0
     radius_change: float = 0.0
     fov_x_deg: float = 50.0
-    shake: ShakeConfig = field(default_factory=ShakeConfig)
+    shake: ShakeConfig = field(default_factory=ShakeConfig)  # high-frequency rotation of each camera (off at rms_deg 0)
 
     def __post_init__(self):
         check_positive(self, "n_cameras", "radius", "fov_x_deg")
@@ -99,13 +99,13 @@ class CameraRigConfig:
 class LightingConfig:
     """Workbench studio lighting, fixed in world space so every camera sees the same shading
     (`shading: flat` shows unlit texture colours)."""
-    shading: Literal["studio", "flat"] = "studio"
-    studio_light: str = "Default"
+    shading: Literal["studio", "flat"] = "studio"  # studio: lit by the studio light; flat: unlit texture colours
+    studio_light: str = "Default"  # the Workbench studio light's name
     rotate_z_deg: float = 30.0
-    shadows: bool = True
+    shadows: bool = True  # cast shadows from light_direction
     shadow_intensity: float = 0.4
-    light_direction: tuple[float, float, float] = (0.4, -0.3, 0.85)
-    cavity: bool = False
+    light_direction: tuple[float, float, float] = (0.4, -0.3, 0.85)  # the shadow light's direction (world, towards the light)
+    cavity: bool = False  # Workbench's cavity shading (darkens creases)
     background: tuple[float, float, float] = (0.05, 0.05, 0.06)  # linear RGB of the empty background
     exposure: float = 1.0  # linear gain on rendered radiance (a brighter or dimmer scene)
 
@@ -143,12 +143,12 @@ class BlurConfig:
     own targets (chosen for the preset's scenes); targets used at the size they were written for are
     never fitted.
     """
-    target_px: dict[str, float] = field(default_factory=dict)
+    target_px: dict[str, float] = field(default_factory=dict)  # blur level -> target median blur length (px)
     exposure_ms: dict[str, float] = field(default_factory=dict)   # levels of a fixed exposure (real-time ms)
     tolerance: float = 0.15
     max_exposure_ms: float = 40.0
     sample_stride_px: int = 4
-    fit: bool = False
+    fit: bool = False  # take the closest exposure however far it lands, instead of refusing a level out of reach
 
     def __post_init__(self):
         check_positive(self, "tolerance", "max_exposure_ms", "sample_stride_px")
@@ -183,7 +183,7 @@ class SpeedConfig:
     exposure_ms * fps * s rendered frames. A speed whose exposure exceeds the clip, or a render whose
     image moves more than `max_px_per_frame` (p90) between rendered frames, is refused.
     """
-    factors: tuple[float, ...] = ()
+    factors: tuple[float, ...] = ()  # speed factors of the variants written beside the scene (<scene>_x<f>)
     exposure_ms: float = 2.0
     max_px_per_frame: float = 2.0
 
@@ -208,14 +208,14 @@ class SourceConfig:
     unless the scene YAML or the preset sets duration_s). rig `auto` places the camera rig from the
     animated bounding box (around it for kind object, inside it for kind room); `config` keeps camera:
     as written. `cameras` names camera objects of the file to film with instead of the rig."""
-    file: str = ""
+    file: str = ""  # a scene file (.blend, glTF, FBX, USD, Alembic) to render instead of a built-in scene
     # built in code: the built-in scene whose builder (blender_scenes/<builtin>.py) makes this one, for a
     # scene YAML copied under a new name (`name: my_cubes`, `source: {builtin: cubes}`); "" = its name
     builtin: str = ""
     frame_start: float | None = None
     frame_end: float | None = None
     fps: float | None = None
-    rig: Literal["auto", "config"] = "auto"
+    rig: Literal["auto", "config"] = "auto"  # auto: place the rig around the file's animation; config: the camera section as given
     # camera objects of the file to use instead of the rig (their animated poses and their common lens)
     cameras: tuple[str, ...] = ()
 
@@ -241,18 +241,18 @@ GROUND_TRUTH_KINDS = ("depth", "flow", "normals", "ids")   # datagen.ground_trut
 
 @dataclass(frozen=True)
 class SceneConfig:
-    name: str
-    kind: Literal["object", "room"]
-    description: str = ""
+    name: str  # the scene's name and folder name
+    kind: Literal["object", "room"]  # object (cameras outside, looking in) or room (cameras inside)
+    description: str = ""  # what the scene shows (free text)
     duration_s: float = 0.2
     motion_strength: float = 1.0
     seed: int = 0
-    render: RenderConfig = field(default_factory=RenderConfig)
-    camera: CameraRigConfig = field(default_factory=CameraRigConfig)
-    lighting: LightingConfig = field(default_factory=LightingConfig)
-    frames: FramesConfig = field(default_factory=FramesConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)  # the renderer and the frame rate and size
+    camera: CameraRigConfig = field(default_factory=CameraRigConfig)  # the camera rig
+    lighting: LightingConfig = field(default_factory=LightingConfig)  # the lighting
+    frames: FramesConfig = field(default_factory=FramesConfig)  # which frames are kept and held out
     blur: BlurConfig = field(default_factory=BlurConfig)  # no target_px: no blurred frames
-    sensor: SimulatorConfig = field(default_factory=SimulatorConfig)
+    sensor: SimulatorConfig = field(default_factory=SimulatorConfig)  # the event sensor (the Sensor table)
     speed: float = 1.0     # this folder's time compression: the clip lasts duration_s / speed real seconds
     speeds: SpeedConfig = field(default_factory=SpeedConfig)   # speed variants written beside the scene
     source: SourceConfig = field(default_factory=SourceConfig)   # built in code, or a file's scene
@@ -268,7 +268,7 @@ class SceneConfig:
     # optional effects of it this scene calls for (simulator.sensor_presets.EFFECTS: latency, readout,
     # bandwidth, on_off_mismatch); the dataset `<preset>@<sensor>` sets it for every scene
     sensor_preset: str = ""
-    sensor_effects: tuple[str, ...] = ()
+    sensor_effects: tuple[str, ...] = ()  # the optional effects of sensor_preset this scene calls for
 
     def __post_init__(self):
         check_positive(self, "duration_s")

@@ -35,10 +35,10 @@ class TrainView:
 class D3DGSConfig:
     """D3DGS on the dataset's RGB frames: `frames: sharp` (the paper's "w/o blur") or a blur level
     ("w/ blur": the blurred frames, each at the pose of its exposure centre)."""
-    frames: str = "sharp"
+    frames: str = "sharp"  # sharp, or a blur level's name
     channels: Literal[1, 3] = 3       # 1: train on the grayscale frames
     lambda_dssim: float = 0.2
-    train: TrainConfig = field(default_factory=TrainConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)  # the training shared by every method
 
 @register
 class D3DGS(Method):

@@ -44,7 +44,7 @@ class DeblurD3DGSConfig:
     over its exposure (recon.event_supervision.exposure_mean), plus Deblur4DGS's multi-resolution consistency:
     lambda_lowres x L1 between the render at the exposure centre and the blurred frame, both
     area-averaged over lowres_factor x lowres_factor blocks (blur moves little at that scale)."""
-    frames: str = "medium"
+    frames: str = "medium"  # the blur level trained on
     blur_samples: int = 5
     lambda_dssim: float = 0.2
     lambda_lowres: float = 1.0

@@ -45,7 +45,7 @@ class E2VIDD3DGSConfig:
     (a recurrent network run over the whole stream), then D3DGS on those frames (grayscale).
     `weights: ""` is the network this project trained (e2vid/weights/); any official-layout file
     (e.g. E2VID_lightweight.pth.tar) works too. events_per_window 0: one window per frame interval."""
-    weights: str = ""
+    weights: str = ""  # the E2VID network's weights file ("": the bundled one)
     events_per_window: int = 0
     lambda_dssim: float = 0.2
     color_correct: bool = True       # score after the same log-intensity gain/offset fit as E-4DGS

@@ -17,10 +17,10 @@ class EventConfig:
     # "pixels": the paper's counts (n_events_object / n_events_room, for its 346x260 sensor) scaled
     # by the pixel count. Either way capped at max_window_fraction of the smallest stream.
     ess: bool = True
-    window_scale: Literal["rate", "pixels"] = "rate"
-    window_fraction: tuple[float, float] = (0.05, 0.2)
-    n_events_object: tuple[int, int] = (5_000, 10_000)
-    n_events_room: tuple[int, int] = (100_000, 1_000_000)
+    window_scale: Literal["rate", "pixels"] = "rate"  # how the ESS window's event count is chosen (the note above)
+    window_fraction: tuple[float, float] = (0.05, 0.2)  # rate: the range as fractions of each camera's events
+    n_events_object: tuple[int, int] = (5_000, 10_000)  # pixels: the paper's range for objects (346x260)
+    n_events_room: tuple[int, int] = (100_000, 1_000_000)  # pixels: the paper's range for rooms (346x260)
     noise_sigma: float = 0.02          # log units, on event-free pixels (0: no jitter)
     max_window_fraction: float = 0.5
     # cameras supervised per step: the ESS window of one camera, then the same time window on
@@ -81,12 +81,12 @@ class E4DGSConfig:
     as one render at the exposure centre (`rgb_render: centre`). With `rgb_every` N > 1 the RGB term
     joins every N-th step only (iterations N, 2N, ...), so the other steps cost what an events-only
     step costs; its weight stays lambda_rgb."""
-    events: EventConfig = field(default_factory=EventConfig)
-    rgb_frames: str = "medium"
+    events: EventConfig = field(default_factory=EventConfig)  # the event supervision (ESS, AES, IIP, TV)
+    rgb_frames: str = "medium"  # the blur level whose frames supervise the RGB term
     lambda_rgb: float = 1.0
     rgb_every: int = 1
     lambda_dssim: float = 0.2
-    rgb_render: Literal["mean", "centre"] = "mean"
+    rgb_render: Literal["mean", "centre"] = "mean"  # a blurred frame as the mean of renders over its exposure, or one at its centre
     rgb_samples: int = 3
     train: TrainConfig = field(default_factory=_e4dgs_train)
 
