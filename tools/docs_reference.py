@@ -107,7 +107,7 @@ def config_rows(cls, prefix: str = "", shared: dict | None = None, where: str = 
         if f.name in bounds:
             lo, hi, why = bounds[f.name]
             what = (what + " " if what else "") + f"(range {lo} to {hi}: {why})"
-        if not what:
+        if not what and not (dataclasses.is_dataclass(tp) and shared is not None and tp in shared):
             raise ValueError(f"{cls.__module__}.{cls.__name__}.{f.name}: no description (a comment on its line or "
                              "the lines above it) and no range: every config field says what it is")
         if dataclasses.is_dataclass(tp) and shared is not None and tp in shared:
