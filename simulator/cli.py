@@ -198,8 +198,10 @@ def add_view_parser(sub) -> None:
     p.add_argument("--step", default=None, help="video: time between frames (default: the window)")
     p.add_argument("--fps", type=positive_float, default=30.0, help="video frame rate (default 30)")
     p.add_argument("--scale", type=positive_int, default=None,
-                   help="enlarge each pixel this many times (default: enough for ~640 px wide, small sensors grow)")
-    p.add_argument("--plain", action="store_true", help="no time label or colour key under the image")
+                   help="enlarge each pixel this many times (default: enough for ~640 px wide, small sensors grow; "
+                        "with --plain, 1)")
+    p.add_argument("--plain", action="store_true", help="no time label or colour key under the image, at the sensor's "
+                                                        "own pixels unless --scale")
     p.add_argument("--flow", type=Path, default=None,
                    help="draw this optical flow over the events as arrows (green): a ground-truth flow file of a scene, "
                         "ground_truth/flow/cam<k>/<j>.png (DSEC-Flow) or .npz, of the sensor's size")
@@ -223,7 +225,8 @@ def run_view(args: argparse.Namespace) -> int:
         first = int(ev.times(0, 1)[0]) if ev.n else ev.t_offset_us
         last = int(ev.times(ev.n - 1, ev.n)[0]) if ev.n else ev.t_offset_us
         start, end = first, max(ev.t_end_us, last) + 1
-        scale = args.scale or max(1, 640 // ev.width)
+        # a plain picture is data: the sensor's own pixels unless --scale says otherwise
+        scale = args.scale or (1 if args.plain else max(1, 640 // ev.width))
         if max(ev.width, ev.height) * scale > MAX_VIEW_SIDE:
             raise SystemExit(f"error: --scale {scale}: the picture would be {ev.width * scale}x{ev.height * scale} "
                              f"pixels; at most {MAX_VIEW_SIDE} a side (--scale <= {max(1, MAX_VIEW_SIDE // max(ev.width, ev.height))})")

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from datagen.summary import blur_table, moving_event_table
 from tools.tool_cli import existing_folder, run_tool

@@ -562,3 +562,33 @@ def test_a_study_the_preset_lacks_is_an_error_and_leaves_nothing(tmp_path, capsy
     err = capsys.readouterr().err
     assert rc != 0 and "no job for studies speed" in err and len(err.strip().splitlines()) == 1, err
     assert not out.exists() and not (tmp_path / "data").exists()
+
+
+def test_the_sensor_axis_moves_the_event_cells_to_the_sensors_dataset(tmp_path, capsys, monkeypatch):
+    """`bench --sensor davis346`: the cells whose method sees events train on <dataset>@davis346 (their
+    own keys and folders), the RGB cells keep the dataset's frames, results go to runs/<preset>@<sensor>;
+    an unknown sensor or a path is refused in one line."""
+    from dataclasses import replace
+
+    from benchmark.config import load_bench
+    from benchmark.grid import jobs
+    from e4dgs.cli import main
+
+    cfg = replace(load_bench("quick"), sensor="davis346", seeds=2, seed_axes=("train", "noise"))
+    by = {j.key: j for j in jobs(cfg) if j.study == "main"}
+    assert by["main/quick@davis346/hinge/e4dgs"].dataset == "quick@davis346"
+    assert by["main/quick@davis346@noise1/hinge/e4dgs/seed1"].dataset == "quick@davis346@noise1"
+    assert by["main/hinge/d3dgs_sharp"].dataset == "" and by["main/quick@noise1/hinge/d3dgs_blur/seed1"]
+    assert by["main/quick@davis346/hinge/e2vid_d3dgs"].folder.startswith("quick@davis346/hinge_x26.2/")
+    monkeypatch.chdir(tmp_path)
+    rc = main(["bench", "--preset", "tiny", "--sensor", "davis346", "--report"])
+    assert rc != 0 and "runs/tiny@davis346: no results to report" in capsys.readouterr().err
+    for bad, words in (("davis999", "unknown sensor 'davis999'"), ("../x", "expected the name of a sensor")):
+        try:
+            rc = main(["bench", "--preset", "tiny", "--sensor", bad, "--report"])
+        except SystemExit as exc:
+            rc, err = 2, str(exc.code)
+        else:
+            err = capsys.readouterr().err
+        assert rc != 0 and words in err, err
+    assert not (tmp_path / "runs").exists()

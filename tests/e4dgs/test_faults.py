@@ -1,6 +1,5 @@
 """Faults users meet: an output that would land on an input, a full disk under every writer (a real
 tmpfs where the machine lets us mount one), and refusals that come before any work."""
-from pathlib import Path
 
 import cv2
 import numpy as np
