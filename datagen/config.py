@@ -102,6 +102,9 @@ def load_preset(preset: str | Path) -> PresetConfig:
 
         read_sensor(m["sensor"])                  # an unknown or broken sensor: its own error, now
         base = load_preset(m["base"])
+        if base.overrides.get("sensor_preset"):
+            raise ConfigError(f"dataset {str(preset)!r}: names two sensors ({base.overrides['sensor_preset']} and "
+                              f"{m['sensor']}); a dataset is seen by one")
         return replace(base, overrides={**base.overrides, "sensor_preset": m["sensor"]})
     path = preset_file(preset)
     data = read_yaml_mapping(path)        # its errors name the file already

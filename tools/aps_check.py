@@ -46,11 +46,16 @@ def read_clip(path: Path) -> tuple[np.ndarray, np.ndarray, object]:
     from eventio.formats import read_recording
 
     frames, t = [], []
-    for packet in aedat.Decoder(str(path)):
-        if "frame" in packet:
-            f = packet["frame"]
-            frames.append(f["pixels"])
-            t.append((int(f["exposure_begin_t"]) + int(f["exposure_end_t"])) // 2)
+    try:
+        for packet in aedat.Decoder(str(path)):
+            if "frame" in packet:
+                f = packet["frame"]
+                frames.append(f["pixels"])
+                t.append((int(f["exposure_begin_t"]) + int(f["exposure_end_t"])) // 2)
+    except Exception as exc:  # noqa: BLE001 - the decoder's errors name neither the file nor what was expected
+        raise ValueError(f"{path}: not an AEDAT4 recording the aedat package reads ({exc})") from None
+    if len(frames) < 2:
+        raise ValueError(f"{path}: {len(frames)} APS frame(s): the check needs a DAVIS recording with frames and events")
     return np.stack(frames), np.array(t, np.int64), read_recording(path)[0]
 
 

@@ -75,3 +75,8 @@ def test_shipped_real_sensors_load_with_every_effect_they_supply(name):
     cfg = load_sensor(name, tuple(supplied))
     assert cfg.pos_threshold > 0 and cfg.refractory_us > 0
     assert all(k in EFFECTS for k in supplied)
+
+
+def test_a_dataset_seen_by_two_sensors_is_refused():
+    with pytest.raises(ConfigError, match="names two sensors"):
+        load_preset("quick@ideal@davis346")
