@@ -35,3 +35,17 @@ def test_a_pixel_whose_light_doubles_fires_floor_of_ln2_over_c_on_events():
     per_pixel = np.bincount(e["y"].astype(int) * 2 + e["x"].astype(int), minlength=4)
     assert per_pixel.tolist() == [0] + [math.floor(math.log(2) / 0.2)] * 3
     assert np.all(e["p"] == 1) and e["t"].min() > 0 and e["t"].max() <= 40_000
+
+
+def test_the_aps_check_refuses_a_recording_it_cannot_decode(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import eventio
+
+    path = tmp_path / "events.h5"
+    eventio.write_events(path, eventio.EventStream(eventio.make_events([1, 5], [0, 1], [0, 1], [1, -1]), 4, 4))
+    r = subprocess.run([sys.executable, "-m", "tools.aps_check", "--clip", str(path)], capture_output=True, text=True,
+                       cwd=Path(__file__).resolve().parents[2])
+    assert r.returncode == 1 and f"{path}: not an AEDAT4 recording" in r.stderr, r.stderr
