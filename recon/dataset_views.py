@@ -28,14 +28,25 @@ def record_camera(dataset: SceneDataset, rec: FrameRecord) -> Camera:
     return dataset_camera(dataset, rec.camera, rec.t_us)
 
 
+def _sized(dataset: SceneDataset, path, img: np.ndarray) -> np.ndarray:
+    """The image if it has the cameras' size, else DatasetError naming the file (when it is loaded,
+    not when a loss meets it)."""
+    want = (dataset.intrinsics.height, dataset.intrinsics.width)
+    if img.shape[:2] != want:
+        raise DatasetError(f"{path}: {img.shape[1]}x{img.shape[0]} pixels, the scene's cameras are {want[1]}x{want[0]}")
+    return img
+
+
 def load_frame(dataset: SceneDataset, rec: FrameRecord, channels: int) -> np.ndarray:
-    """Frame [H, W, channels] in [0, 1] (sRGB-encoded as stored)."""
+    """Frame [H, W, channels] in [0, 1] (sRGB-encoded as stored); DatasetError for a frame that is not
+    of the cameras' size or kind."""
     if channels == 3:
-        img = dataset.load_image(rec.path)
+        img = _sized(dataset, rec.path, dataset.load_image(rec.path))
         if img.ndim != 3:
             raise DatasetError(f"{rec.path}: expected an RGB image")
         return img
-    img = dataset.load_image(rec.gray_path) if rec.gray_path is not None else dataset.load_image(rec.path)
+    path = rec.gray_path if rec.gray_path is not None else rec.path
+    img = _sized(dataset, path, dataset.load_image(path))
     return (gray_from_srgb(img) if img.ndim == 3 else img)[..., None]
 
 

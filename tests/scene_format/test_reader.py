@@ -51,3 +51,24 @@ def test_a_hand_edited_transforms_file_is_refused_naming_the_field(gt_scene, tmp
         rc, _ = 1, print(exc.code, file=__import__("sys").stderr)
     err = capsys.readouterr().err
     assert rc == 1 and words in err and "internal error" not in err, err
+
+
+@pytest.mark.parametrize("folder", ["gray", "rgb"])
+def test_a_training_frame_of_another_size_is_refused_when_loaded_naming_it(gt_scene, tmp_path, folder):
+    """A gray or RGB frame of the wrong size fails where it is read (recon.dataset_views.load_frame),
+    naming the file, not later where a loss meets it."""
+    import shutil
+
+    import cv2
+
+    from recon.dataset_views import load_frame
+    from scene_format.reader import DatasetError, SceneDataset
+
+    scene = tmp_path / "cubes"
+    shutil.copytree(gt_scene, scene)
+    ds = SceneDataset(scene)
+    rec = ds.frames("train")[0]
+    path = rec.gray_path if folder == "gray" else rec.path
+    cv2.imwrite(str(path), np.zeros((5, 7) if folder == "gray" else (5, 7, 3), np.uint8))
+    with pytest.raises(DatasetError, match=re.escape(f"{path}: 7x5 pixels, the scene's cameras are 64x48")):
+        load_frame(ds, rec, 1 if folder == "gray" else 3)
