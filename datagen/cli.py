@@ -182,6 +182,9 @@ def check_event_file(path: Path) -> int:
     return 0
 
 
+OWNED_FOLDERS = ("events", "exports", "ground_truth", "rgb", "frames", "gray", "blur", "dynamic")
+
+
 def run_check(args: argparse.Namespace) -> int:
     import json
 
@@ -212,6 +215,14 @@ def run_check(args: argparse.Namespace) -> int:
         else:
             print(f"{d}: OK ({n} files match the manifest)")
         extra = unlisted_files(d)
+        # in the folders the generator owns, a file it did not write is an error (a stray file there is
+        # read as data: an export, an event file, a ground-truth map); elsewhere a note
+        owned = [rel for rel in extra if rel.split("/")[0] in OWNED_FOLDERS]
+        if owned:
+            failed += 1
+            print(f"{d}: {len(owned)} file(s) in the generator's folders that the manifest does not list: "
+                  + ", ".join(owned[:5]) + (", ..." if len(owned) > 5 else "") + " (remove them, or generate the scene again)")
+        extra = [rel for rel in extra if rel not in owned]
         if extra:   # not an error (a user may keep notes beside the data), but never passed over in silence
             print(f"{d}: note: {len(extra)} file(s) the manifest does not list, not verified: "
                   + ", ".join(extra[:5]) + (", ..." if len(extra) > 5 else ""))

@@ -452,3 +452,18 @@ def test_check_reads_exported_event_files_behind_a_resigned_manifest(gt_scene, t
     assert any("exports/aedat4/cam1.aedat4: " in p and "not a recognised event file" in p for p in problems), problems
     _resign_file(scene, "exports/aedat4/cam1.aedat4", (scene / "events/cam1.h5").read_bytes())
     assert any("exports/aedat4/cam1.aedat4: holds h5, not the aedat4 events" in p for p in verify_scene(scene))
+
+
+def test_check_fails_on_a_stray_file_in_the_generators_folders(gt_scene, tmp_path):
+    """A file the manifest does not list inside exports/ (or events/, ground_truth/, ...) fails the
+    check naming it; beside the data it is a note."""
+    import shutil
+
+    scene = tmp_path / "cubes"
+    shutil.copytree(gt_scene, scene)
+    (scene / "exports" / "txt").mkdir(parents=True)
+    (scene / "exports" / "txt" / "cam0.txt").write_text("not events\n")
+    (scene / "notes.md").write_text("mine\n")
+    r = subprocess.run([sys.executable, "-m", "e4dgs.cli", "check", str(scene)], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 1 and "exports/txt/cam0.txt" in r.stdout and "generate the scene again" in r.stdout, r.stdout
+    assert "note: 1 file(s) the manifest does not list" in r.stdout and "notes.md" in r.stdout
