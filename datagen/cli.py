@@ -182,7 +182,7 @@ def check_event_file(path: Path) -> int:
     return 0
 
 
-OWNED_FOLDERS = ("events", "exports", "ground_truth", "rgb", "frames", "gray", "blur", "dynamic")
+OWNED_FOLDERS = ("events", "exports", "ground_truth", "rgb", "frames", "gray", "blur")   # dynamic/: `e4dgs masks` adds it later
 
 
 def run_check(args: argparse.Namespace) -> int:
