@@ -422,3 +422,20 @@ def test_the_bar_shows_each_running_jobs_position_and_time_left_also_from_a_chil
     assert re.search(r"scene: \d+/14 timestamps, ~\d+ s left", err), err[-2000:]
     assert re.search(r"cell: \d+/14 it, ~\d+ s left", err), err[-2000:]
     assert not list(tmp_path.glob("*.progress"))          # a finished job's report is gone
+
+
+def test_a_ray_that_cannot_start_is_a_connection_error_not_an_internal_one(monkeypatch):
+    """ray.init failing (an unreachable address, a broken install) is one ConnectionError naming the
+    address, which the command line prints as an error line."""
+    import ray
+
+    from common.taskpool import ray_session
+
+    def refuse(*a, **k):
+        raise RuntimeError("Failed to connect to GCS at address 10.0.0.9:6379 within 60 seconds")
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(ray, "init", refuse)
+    with pytest.raises(ConnectionError, match=r"ray: cannot connect to Ray at '10.0.0.9:6379' \(RuntimeError: Failed"):
+        with ray_session(RayOptions(address="10.0.0.9:6379")):
+            pass
