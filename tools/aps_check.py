@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import math
 import sys
 from pathlib import Path
@@ -134,7 +133,7 @@ def fit(frames, t_us, real, static, log=print):
 
 def main(argv: list[str] | None = None) -> int:
     from simulator.sensor_presets import load_sensor
-    from tools.tool_cli import existing_file
+    from tools.tool_cli import existing_file, write_json
     from simulator.aps import DN_FULL_SCALE, denoise_aps, static_pixels
     from simulator.config import SimulatorConfig
 
@@ -179,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{f['iei_min_us']:.0f} / {f['iei_p0_1_us']:.0f} | {f['static_rate_hz']:.4f} | {f['w1_log_rate']:.3f} | "
               f"{f['w1_log_iei']:.3f} |")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+        write_json(args.json, out)
     return 0
 
 

@@ -31,7 +31,6 @@ threshold scaling).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -180,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     from simulator.config import SimulatorConfig
     from simulator.sensor_presets import load_sensor
     from tools.aps_check import V2E
-    from tools.tool_cli import existing_file, float_in
+    from tools.tool_cli import existing_file, float_in, write_json
 
     p = argparse.ArgumentParser(prog="python -m tools.noise_check", description=__doc__.split("\n\n")[0])
     p.add_argument("--clip", type=existing_file, required=True, help="an event recording (any format `e4dgs import` reads)")
@@ -225,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {f['rate_hz']:.4f} | {f['on_fraction']:.3f} | {f['hot_fraction']:.5f} | "
               f"{f['iei_p0_1_us']:.0f} | {d['w1_log_rate']:.3f} | {d['w1_log_iei']:.3f} |")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+        write_json(args.json, out)
     return 0
 
 

@@ -43,6 +43,15 @@ def existing_file(text: str) -> Path:
     return path
 
 
+def write_json(path: Path, doc) -> None:
+    """A tool's figures as JSON (NumPy scalars as numbers, anything else as text), written atomically."""
+    import json
+
+    from common.fileio import write_text_atomic
+
+    write_text_atomic(path, json.dumps(doc, indent=1, default=lambda v: v.item() if hasattr(v, "item") else str(v)))
+
+
 def run_tool(main: Callable[..., int], argv: list[str] | None = None) -> int:
     """Run a tool's main(argv) as `e4dgs` runs a command: a failure is one line naming what is wrong."""
     from e4dgs.cli import describe_failure
