@@ -182,7 +182,7 @@ def check_event_file(path: Path) -> int:
     return 0
 
 
-OWNED_FOLDERS = ("events", "exports", "ground_truth", "rgb", "frames", "gray", "blur")   # dynamic/: `e4dgs masks` adds it later
+OWNED_FOLDERS = ("events", "exports", "ground_truth")   # where a stray file would be taken for data
 
 
 def run_check(args: argparse.Namespace) -> int:
