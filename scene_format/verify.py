@@ -49,6 +49,7 @@ def verify_scene(scene_dir: Path, progress: Callable[[str], None] | None = None)
     except (OSError, ValueError, KeyError, TypeError):
         return [f"{manifest_path}: not a readable manifest with a 'files' table"]
     problems = []
+    hw = _sensor_size(scene_dir)          # the cameras' size, read once for every map's check
     for rel, rec in sorted(files.items()):
         path = scene_dir / rel
         if progress:
@@ -69,7 +70,7 @@ def verify_scene(scene_dir: Path, progress: Callable[[str], None] | None = None)
             except EventFileError as exc:
                 problems.append(str(exc))
         else:
-            problem = content_problem(scene_dir, rel, path)
+            problem = content_problem(scene_dir, rel, path, hw)
             if problem:
                 problems.append(problem)
     return problems + count_problems(scene_dir, manifest)
@@ -84,14 +85,14 @@ def _sensor_size(scene_dir: Path) -> tuple[int, int] | None:
         return None
 
 
-def content_problem(scene_dir: Path, rel: str, path: Path) -> str | None:
+def content_problem(scene_dir: Path, rel: str, path: Path, hw: tuple[int, int] | None) -> str | None:
     """What is wrong with the content of a listed file whose hash matches (a manifest re-signed over a
     wrong file): ground-truth maps of the sensor's size and type, one event label per event, and
-    exported event files that read as event files. None when it is what its place says."""
+    exported event files that read as event files (hw: the cameras' (height, width), None when
+    unknown). None when it is what its place says."""
     import numpy as np
 
     parts = rel.split("/")
-    hw = _sensor_size(scene_dir)
     try:
         if parts[0] == "ground_truth" and len(parts) == 4 and parts[1] in ("flow", "ids", "depth", "normals", "velocity"):
             kind, suffix = parts[1], path.suffix.lower()
