@@ -49,6 +49,7 @@ CASES = [(cmd, a.dest) for cmd, p in PARSERS.items() if cmd not in NOT_SWEPT for
 
 def argv_for(cmd: str, missing_dest: str, missing: Path, out: Path) -> list[str]:
     parser = PARSERS[cmd]
+    inputs = {a.dest for a in input_actions(parser)}
     argv: list[str] = []
     for group in parser._mutually_exclusive_groups:     # a required choice: its first option
         if group.required:
@@ -62,7 +63,7 @@ def argv_for(cmd: str, missing_dest: str, missing: Path, out: Path) -> list[str]
             value = str(missing)
         elif a.dest in OUTPUTS and (a.required or not a.option_strings):
             value = str(out / OUT_NAME.get(cmd, "result"))
-        elif a.dest in input_actions_dests(parser):
+        elif a.dest in inputs:
             value = str(missing)          # every input missing: the first one read fails
         elif a.required or (not a.option_strings and a.nargs not in ("?", "*")):
             value = FILLERS.get(a.dest)
@@ -75,10 +76,6 @@ def argv_for(cmd: str, missing_dest: str, missing: Path, out: Path) -> list[str]
         else:
             argv.append(value)
     return argv
-
-
-def input_actions_dests(parser) -> set[str]:
-    return {a.dest for a in input_actions(parser)}
 
 
 def test_every_parser_with_an_input_is_swept():
