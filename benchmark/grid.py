@@ -135,11 +135,12 @@ def resolved_placement(method_cfg) -> dict[str, str]:
     t = getattr(method_cfg, "train", None)
     if t is None:
         return {}
-    return _placement(t.device, t.backend, t.precision, t.deform_field.kind)
+    return _placement(t.device, t.backend, t.precision, t.deform_field.kind, (t.deform_field.depth, t.deform_field.width))
 
 
 @functools.lru_cache(maxsize=None)
-def _placement(device: str, backend: str, precision: str, field_kind: str) -> dict[str, str]:
+def _placement(device: str, backend: str, precision: str, field_kind: str,
+               size: tuple[int, int] = (8, 256)) -> dict[str, str]:
     from recon.device import DeviceError, run_placement
     from recon.precision import resolve_precision
 
@@ -148,7 +149,7 @@ def _placement(device: str, backend: str, precision: str, field_kind: str) -> di
     except DeviceError as exc:
         raise ConfigError(str(exc)) from None
     return {"device": dev.type, "backend": back,          # as recon.trainer.Trainer resolves them
-            "precision": resolve_precision(precision, dev, field_kind=field_kind).dtype}
+            "precision": resolve_precision(precision, dev, field_kind=field_kind, size=size).dtype}
 
 
 @functools.lru_cache(maxsize=4096)

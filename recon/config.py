@@ -22,6 +22,8 @@ from typing import Literal
 
 from common.config import MAX_ITERATIONS, SEED_RANGE, ConfigError, check_positive
 
+PRECISIONS = ("auto", "float32", "bfloat16")      # train.precision's values (recon.precision chooses for auto)
+
 REFERENCE_ITERATIONS = 40_000
 MIN_DENSIFY_INTERVAL = 10
 MIN_OPACITY_RESET_INTERVAL = 1000
@@ -43,15 +45,15 @@ class InitConfig:
     `auto` starts from the auto volume instead, recorded in run.json's `init_fallback`; `error` stops."""
     kind: Literal["auto", "cube", "sphere", "points", "events"] = "auto"  # where the initial points lie (the class note)
     color: Literal["mid", "background"] = "mid"  # the initial points' colour: mid-grey or the empty background's
-    n_points_object: int = 100_000
-    n_points_room: int = 200_000
-    cube_half_size: float | None = None
-    sphere_radius: float | None = None
+    n_points_object: int = 100_000  # initial points in an object scene
+    n_points_room: int = 200_000  # initial points in a room scene
+    cube_half_size: float | None = None  # half size of the initial cube (None: 0.35 x the rig's radius)
+    sphere_radius: float | None = None  # radius of a room's initial sphere (None: 10, the paper's)
     points_file: str | None = None   # .npy or .ply-free [N, 3] float array, for kind: points
-    init_opacity: float = 0.1
-    seed: int = 0
-    carve_candidates: int = 200_000
-    carve_times: int = 9
+    init_opacity: float = 0.1  # every initial point's opacity
+    seed: int = 0  # the initial points' random draws
+    carve_candidates: int = 200_000  # events: candidate points tested against the cameras' events
+    carve_times: int = 9  # events: instants of the clip the candidates are tested at
     carve_window: float = 0.01      # quick hinge, untrained model: 0.1 / 3 px 27.99 dB, 0.03 / 2 px 28.37,
     carve_min_events: int = 2       # 0.01 / 1 px 28.72 (the shorter the window, the less the motion
     carve_dilate_px: int = 1        # smears the silhouettes; docs/design/e4dgs.md)
@@ -74,15 +76,15 @@ class InitConfig:
 class LearningRates:
     """Adam learning rates of the public D3DGS code. position_* are multiplied by the scene extent
     (3DGS's spatial_lr_scale); the deformation field's rate starts at position_init x deform_scale."""
-    position_init: float = 1.6e-4
-    position_final: float = 1.6e-6
-    position_delay_mult: float = 0.01
+    position_init: float = 1.6e-4  # means' rate at the start (x scene extent)
+    position_final: float = 1.6e-6  # means' rate at the end of position_lr_steps (x scene extent)
+    position_delay_mult: float = 0.01  # 3DGS's delay multiplier of the position rate
     feature: float = 0.0025          # SH degree 0; higher degrees use feature / 20
-    opacity: float = 0.05
+    opacity: float = 0.05  # opacity logits' rate
     opacity_final: float | None = None   # None: constant; else log-linear decay to it over the run
-    scaling: float = 0.001
-    rotation: float = 0.001
-    deform_scale: float = 5.0
+    scaling: float = 0.001  # log-scales' rate
+    rotation: float = 0.001  # quaternions' rate
+    deform_scale: float = 5.0  # the deformation's rate over position_init
 
     def __post_init__(self):
         for name in ("position_init", "position_final", "position_delay_mult", "feature", "opacity", "scaling",
@@ -97,33 +99,35 @@ class LearningRates:
 class DensifyConfig:
     """3DGS adaptive density control. Iteration numbers are for the 40k reference budget."""
     enabled: bool = True  # clone, split and prune Gaussians during training
-    start: int = 500
-    stop: int = 15_000
-    interval: int = 100
+    start: int = 500  # first densification iteration (reference iterations)
+    stop: int = 15_000  # last densification iteration (reference iterations)
+    interval: int = 100  # iterations between densifications (reference iterations)
     grad_threshold: float = 2e-4     # on the NDC-space gradient norm of the projected means
     percent_dense: float = 0.01      # clone below / split above this fraction of the scene extent
-    min_opacity: float = 0.005
+    min_opacity: float = 0.005  # prune Gaussians below this opacity
     max_screen_size: float = 20.0    # pixels; applied after the first opacity reset
     max_world_size: float = 0.1      # fraction of the scene extent
     opacity_reset: bool = True  # reset every opacity every opacity_reset_interval iterations
-    opacity_reset_interval: int = 3000
+    opacity_reset_interval: int = 3000  # iterations between opacity resets (reference iterations)
     max_gaussians: int = 1_000_000   # no densification beyond this count
 
 
 @dataclass(frozen=True)
 class DeformFieldConfig:
-    """What deforms the canonical Gaussians over time: `mlp`, the paper's 8 x 256 network on the
-    encoded position and time (D3DGS's field, recon.deform), or `trajectory`, per-Gaussian
+    """What deforms the canonical Gaussians over time: `mlp`, a network on the encoded position and
+    time (D3DGS's field, recon.deform; the paper's is 8 layers of 256, `depth` x `width`), or `trajectory`, per-Gaussian
     coefficients of `degree` polynomial and `fourier` sine / cosine pairs of time (Gaussian-Flow's
     dual-domain deformation, recon.trajectory). Trajectory coefficients learn at lr_scale x the
     means' rate, decaying after the warm-up as the MLP's rate does. `smoothness` weighs a temporal
     smoothness term added to the loss while the trajectories are on: the mean acceleration energy of
     the position offsets over the clip, in units of the scene's extent (recon.trajectory); 0 is off."""
     kind: Literal["mlp", "trajectory"] = "mlp"  # the paper's deformation MLP, or per-Gaussian trajectories
-    degree: int = 3
-    fourier: int = 2
-    lr_scale: float = 1.0
-    smoothness: float = 0.0
+    degree: int = 3  # trajectory: polynomial terms of time
+    fourier: int = 2  # trajectory: sine / cosine pairs of time
+    lr_scale: float = 1.0  # the field's rate over the means' rate
+    smoothness: float = 0.0  # trajectory: weight of the acceleration energy (0: off)
+    depth: int = 8  # mlp: linear layers (the encoded input joins again after depth // 2)
+    width: int = 256  # mlp: hidden units per layer
 
     def __post_init__(self):
         if self.degree < 0 or self.fourier < 0 or self.degree + self.fourier == 0:
@@ -132,6 +136,10 @@ class DeformFieldConfig:
             raise ConfigError(f"lr_scale: expected a value >= 0, got {self.lr_scale!r}")
         if not (self.smoothness >= 0 and math.isfinite(self.smoothness)):
             raise ConfigError(f"smoothness: expected a finite value >= 0, got {self.smoothness!r}")
+        if not (isinstance(self.depth, int) and 3 <= self.depth <= 16):
+            raise ConfigError(f"depth: expected an integer in [3, 16], got {self.depth!r}")
+        if not (isinstance(self.width, int) and 8 <= self.width <= 1024):
+            raise ConfigError(f"width: expected an integer in [8, 1024], got {self.width!r}")
         if self.smoothness > 0 and self.kind != "trajectory":
             raise ConfigError(f"smoothness: regularises per-Gaussian trajectories; expected kind: trajectory "
                               f"with smoothness {self.smoothness!r}, got kind: {self.kind}")
@@ -139,7 +147,8 @@ class DeformFieldConfig:
     def spec(self) -> dict:
         """recon.deform.make_field's spec of this field."""
         if self.kind == "mlp":
-            return {"kind": "mlp"}
+            size = {} if (self.depth, self.width) == (8, 256) else {"depth": self.depth, "width": self.width}
+            return {"kind": "mlp", **size}       # as recon.deform.mlp_spec writes it
         return {"kind": "trajectory", "degree": self.degree, "fourier": self.fourier}
 
 
@@ -186,7 +195,7 @@ class Schedule:
 @dataclass(frozen=True)
 class TrainConfig:
     """What every method's trainer shares: budget, schedule, checkpoints, evaluation."""
-    iterations: int = 40_000
+    iterations: int = 40_000  # training iterations of this run
     scale_schedule: bool = True  # scale the schedule's iteration counts to this run's iterations
     # the budget the schedule's iteration counts below are written for; with scale_schedule they are
     # scaled by iterations / schedule_reference (a recipe written for 750 iterations, run for 420)
@@ -195,9 +204,9 @@ class TrainConfig:
     deform_field: DeformFieldConfig = field(default_factory=DeformFieldConfig)  # what deforms the Gaussians over time
     coarse_to_fine: CoarseToFineConfig = field(default_factory=CoarseToFineConfig)  # reduced resolution first
     warm_up: int = 3000               # deformation off before this (reference iterations)
-    position_lr_steps: int = 30_000
-    deform_lr_steps: int = 40_000
-    sh_degree: int = 3
+    position_lr_steps: int = 30_000  # iterations over which the position rate decays (reference iterations)
+    deform_lr_steps: int = 40_000  # iterations over which the deformation rate decays (reference iterations)
+    sh_degree: int = 3  # highest spherical-harmonics degree of the colours (0-3)
     sh_interval: int = 1000           # one more SH degree every this many (reference) iterations
     lr: LearningRates = field(default_factory=LearningRates)  # learning rates
     densify: DensifyConfig = field(default_factory=DensifyConfig)  # adaptive density control
@@ -209,7 +218,7 @@ class TrainConfig:
     precision: str = "auto"
     backend: str = "auto"             # auto: gsplat on CUDA, the numba cpu backend on the CPU (recon.raster)
     device: str = "auto"              # auto: CUDA when torch sees it and gsplat is installed, else the CPU
-    seed: int = 0
+    seed: int = 0  # training's random draws (views, windows, noise)
     checkpoint_every: int = 500       # real iterations between resumable checkpoints
     eval_every: int = 0               # real iterations between test-PSNR log rows (0: at snapshots only)
     eval_max_views: int = 0           # test views used for the log's PSNR (0: all)
@@ -226,8 +235,8 @@ class TrainConfig:
                 raise ConfigError(f"snapshots: expected fractions in (0, 1], got {f!r}")
         if self.background is not None and not all(0 <= c <= 1 for c in self.background):
             raise ConfigError(f"background: expected values in [0, 1], got {self.background!r}")
-        if self.precision not in ("auto", "float32", "bfloat16"):
-            raise ConfigError(f"precision: expected auto, float32 or bfloat16, got {self.precision!r}")
+        if self.precision not in PRECISIONS:
+            raise ConfigError(f"precision: expected {', '.join(PRECISIONS[:-1])} or {PRECISIONS[-1]}, got {self.precision!r}")
         if self.backend not in ("auto", "cpu", "gsplat", "torch", "dense"):
             raise ConfigError(f"backend: expected auto, cpu, gsplat, torch or dense, got {self.backend!r}")
         if not (self.device in ("auto", "cpu", "cuda") or re.fullmatch(r"cuda:\d+", self.device)):

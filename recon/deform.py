@@ -1,7 +1,8 @@
 """The D3DGS deformation field: MLP F(gamma(sg(x)), gamma(t)) -> (dx, dr, ds).
 
-Layout as in the public Deformable-3D-Gaussians code: 8 linear layers of 256 with ReLU, the encoded
-inputs concatenated again after layer 4, positional encodings with the input included and
+Layout as in the public Deformable-3D-Gaussians code: 8 linear layers of 256 with ReLU (`depth` x
+`width`, smaller fields by choice: train.deform_field), the encoded inputs concatenated again after
+layer depth // 2, positional encodings with the input included and
 frequencies 2^0 .. 2^(n-1) (sin, cos per frequency; 10 for positions, 6 for time), and three linear
 heads: position offset (3), quaternion offset (4, added before normalisation) and log-scale
 offset (3). The heads start at zero, so an untrained field is the identity.
@@ -21,12 +22,23 @@ def positional_encoding(x: torch.Tensor, n_freqs: int) -> torch.Tensor:
     return torch.cat(parts, dim=-1)
 
 
+PAPER_SIZE = (8, 256)    # depth, width of the paper's (D3DGS's) field
+
+
+def mlp_spec(depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1]) -> dict:
+    """make_field's spec of an MLP: {"kind": "mlp"} for the paper's size (what runs recorded before
+    the size was a choice), with depth and width otherwise."""
+    if (depth, width) == PAPER_SIZE:
+        return {"kind": "mlp"}
+    return {"kind": "mlp", "depth": depth, "width": width}
+
+
 class DeformationField(nn.Module):
     kind = "mlp"
 
-    def __init__(self, depth: int = 8, width: int = 256, x_freqs: int = 10, t_freqs: int = 6):
+    def __init__(self, depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1], x_freqs: int = 10, t_freqs: int = 6):
         super().__init__()
-        self.depth, self.x_freqs, self.t_freqs = depth, x_freqs, t_freqs
+        self.depth, self.width, self.x_freqs, self.t_freqs = depth, width, x_freqs, t_freqs
         self.skip = depth // 2
         in_ch = 3 * (1 + 2 * x_freqs) + (1 + 2 * t_freqs)
         layers = [nn.Linear(in_ch, width)]
@@ -41,7 +53,7 @@ class DeformationField(nn.Module):
             nn.init.zeros_(head.bias)
 
     def spec(self) -> dict:
-        return {"kind": self.kind}
+        return mlp_spec(self.depth, self.width)
 
     def deform(self, gaussians, t: float):
         """(dx, dq, dlog_s) of `gaussians` at normalised time t: the MLP at their deformation inputs."""
@@ -68,14 +80,15 @@ class DeformationField(nn.Module):
 
 
 def make_field(spec: dict | None = None) -> nn.Module:
-    """The deformation field a spec names: {"kind": "mlp"} (the paper's MLP, the default) or
-    {"kind": "trajectory", "degree": d, "fourier": L} (per-Gaussian trajectories, recon.trajectory)."""
+    """The deformation field a spec names: {"kind": "mlp"} (the paper's MLP, the default; "depth" and
+    "width" for another size) or {"kind": "trajectory", "degree": d, "fourier": L} (per-Gaussian
+    trajectories, recon.trajectory)."""
     from recon.trajectory import TrajectoryField
 
     spec = dict(spec or {"kind": "mlp"})
     kind = spec.pop("kind", "mlp")
-    if kind == "mlp" and not spec:
-        return DeformationField()
+    if kind == "mlp" and set(spec) <= {"depth", "width"}:
+        return DeformationField(**spec)
     if kind == "trajectory":
         return TrajectoryField(**spec)
     raise ValueError(f"deformation field: expected kind mlp or trajectory, got {kind!r} with {spec}")

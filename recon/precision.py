@@ -32,9 +32,9 @@ import torch
 
 from common.fileio import write_text_atomic
 from common.machine import cache_dir, cpu_features, cpu_model
-from recon.deform import DeformationField
+from recon.config import PRECISIONS
+from recon.deform import PAPER_SIZE, DeformationField
 
-PRECISIONS = ("auto", "float32", "bfloat16")
 DTYPES = ("float32", "bfloat16")
 MEASURE_POINTS = 4096      # Gaussians of the timing (quick runs train 2k-20k; the ratio is what matters)
 MEASURE_REPEATS = 3        # timed forward + backward passes per dtype, after one warm-up each
@@ -87,10 +87,11 @@ def autocast(dtype: str, device: torch.device | str):
     return contextlib.nullcontext()
 
 
-def timing_field(device: torch.device) -> DeformationField:
-    """A field whose heads are not zero (an untrained field's backward would skip nothing, but keep it real)."""
+def timing_field(device: torch.device, size: tuple[int, int] = PAPER_SIZE) -> DeformationField:
+    """A field of `size` (depth, width) whose heads are not zero (an untrained field's backward would
+    skip nothing, but keep it real)."""
     gen = torch.Generator().manual_seed(0)
-    f = DeformationField()
+    f = DeformationField(*size)
     with torch.no_grad():
         for head in (f.warp, f.rotation, f.scaling):
             head.weight.copy_(torch.randn(head.weight.shape, generator=gen) * 0.01)
@@ -98,13 +99,15 @@ def timing_field(device: torch.device) -> DeformationField:
 
 
 def time_deformation(device: torch.device, n_points: int = MEASURE_POINTS, repeats: int = MEASURE_REPEATS,
-                     stop_ratio: float = STOP_RATIO, clock: Callable[[], float] = time.perf_counter) -> dict[str, float]:
-    """Median milliseconds of one forward + backward of the deformation field on n_points points, per dtype.
+                     stop_ratio: float = STOP_RATIO, clock: Callable[[], float] = time.perf_counter,
+                     size: tuple[int, int] = PAPER_SIZE) -> dict[str, float]:
+    """Median milliseconds of one forward + backward of a deformation field of `size` (depth, width)
+    on n_points points, per dtype (the ratio depends on the size: a small field may be faster in float32).
 
     Both dtypes run one warm-up pass, then the timed passes alternate between them, so a stall of the
     machine hits both. A dtype whose warm-up took stop_ratio x the other's is reported by that one pass
     (it cannot win: on a core without bf16 this saves ~10 s of a 45x slower product)."""
-    f = timing_field(device)
+    f = timing_field(device, size)
     gen = torch.Generator().manual_seed(1)
     x = torch.rand(n_points, 3, generator=gen).to(device)
 
@@ -130,13 +133,15 @@ def time_deformation(device: torch.device, n_points: int = MEASURE_POINTS, repea
     return {d: round(statistics.median(timed[d]) if timed[d] else warm[d], 3) for d in DTYPES}
 
 
-def machine_key(device: torch.device) -> str:
-    """What a measurement holds for: the processor, torch's version and its thread count."""
+def machine_key(device: torch.device, size: tuple[int, int] = PAPER_SIZE) -> str:
+    """What a measurement holds for: the processor, torch's version, its thread count (and the
+    field's size where it is not the paper's)."""
     if device.type == "cuda":
         proc = torch.cuda.get_device_name(device)
     else:
         proc = f"{cpu_model()} [{' '.join(cpu_features())}]"
-    return f"{proc} | torch {torch.__version__} | {torch.get_num_threads()} threads"
+    key = f"{proc} | torch {torch.__version__} | {torch.get_num_threads()} threads"
+    return key if tuple(size) == PAPER_SIZE else f"{key} | mlp {size[0]}x{size[1]}"
 
 
 def _read_cache(path: Path) -> dict:
@@ -160,10 +165,11 @@ def _cached_timings(entry) -> dict[str, float] | None:
 
 def resolve_precision(requested: str, device: torch.device | str, cache: Path | None = None,
                       timer: Callable[[torch.device], Mapping[str, float]] = time_deformation,
-                      field_kind: str = "mlp") -> PrecisionChoice:
+                      field_kind: str = "mlp", size: tuple[int, int] = PAPER_SIZE) -> PrecisionChoice:
     """The dtype a run computes its deformation in: `requested` as it is, or for `auto` the faster one
     on this machine (cached in `cache`, default cache_dir() / precision.json; a cache that cannot be
-    read is measured again, one that cannot be written is warned about and skipped). A trajectory
+    read is measured again, one that cannot be written is warned about and skipped), for an MLP of
+    `size` (depth, width). A trajectory
     field (a few products per Gaussian) has nothing to gain: `auto` is float32 for it."""
     check_precision(requested)
     device = torch.device(device)
@@ -172,14 +178,14 @@ def resolve_precision(requested: str, device: torch.device | str, cache: Path | 
     if field_kind == "trajectory":
         return PrecisionChoice("float32", "trajectory")
     if device.type == "cuda":
-        return PrecisionChoice("float32", "cuda", machine_key(device))
-    key = machine_key(device)
+        return PrecisionChoice("float32", "cuda", machine_key(device, size))
+    key = machine_key(device, size)
     path = Path(cache) if cache is not None else cache_dir() / CACHE_FILE
     machines = _read_cache(path)
     timings = _cached_timings(machines.get(key))
     if timings is not None:
         return PrecisionChoice(faster_dtype(timings), "cached", key, timings)
-    timings = {d: float(v) for d, v in timer(device).items()}
+    timings = {d: float(v) for d, v in timer(device, size=tuple(size)).items()}
     machines[key] = {"timings_ms": timings, "n_points": MEASURE_POINTS, "measured": time.strftime("%Y-%m-%d %H:%M:%S")}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -151,7 +151,8 @@ class Trainer:
     @functools.cached_property
     def precision(self) -> PrecisionChoice:
         """The deformation's dtype on this machine (train.precision; `auto` measured once per machine)."""
-        return resolve_precision(self.tcfg.precision, self.device, field_kind=self.tcfg.deform_field.kind)
+        fc = self.tcfg.deform_field
+        return resolve_precision(self.tcfg.precision, self.device, field_kind=fc.kind, size=(fc.depth, fc.width))
 
     # -- set-up -----------------------------------------------------------------------------------
     def _new_model(self) -> DynamicGaussians:

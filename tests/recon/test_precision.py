@@ -25,7 +25,7 @@ class Killed(Exception):
 def fake_timer(timings):
     calls = []
 
-    def timer(device):
+    def timer(device, size=(8, 256)):
         calls.append(device)
         return dict(timings)
     timer.calls = calls

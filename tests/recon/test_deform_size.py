@@ -1,0 +1,72 @@
+"""The deformation MLP's size (train.deform_field.depth / width): the paper's 8 x 256 by default and
+recorded as before ({"kind": "mlp"}), another size built, recorded, saved, loaded and timed as itself."""
+import pytest
+import torch
+
+import recon
+from common.config import ConfigError
+from recon import precision as prec
+from recon.deform import PAPER_SIZE, DeformationField, make_field, mlp_spec
+
+
+def n_params(depth: int, width: int, x_freqs: int = 10, t_freqs: int = 6) -> int:
+    """The field's parameter count, from its layout: layer 0 takes the encoding, layer depth // 2 + 1
+    the encoding and the hidden state, the others the hidden state; three heads of 3, 4, 3."""
+    enc = 3 * (1 + 2 * x_freqs) + (1 + 2 * t_freqs)
+    n = enc * width + width
+    for i in range(depth - 1):
+        fan_in = width + enc if i == depth // 2 else width
+        n += fan_in * width + width
+    return n + (width + 1) * 10
+
+
+@pytest.mark.parametrize("depth, width", [(8, 256), (4, 128), (3, 8), (6, 64)])
+def test_a_field_of_any_size_has_its_layout_and_starts_as_the_identity(depth, width):
+    f = make_field(mlp_spec(depth, width))
+    assert isinstance(f, DeformationField) and (f.depth, f.width) == (depth, width)
+    assert sum(p.numel() for p in f.parameters()) == n_params(depth, width)
+    assert f.spec() == mlp_spec(depth, width) and make_field(f.spec()).spec() == f.spec()
+    dx, dq, ds = f(torch.rand(5, 3), 0.4)
+    assert dx.abs().max() == 0 and dq.abs().max() == 0 and ds.abs().max() == 0
+
+
+def test_the_papers_size_is_recorded_as_before():
+    assert mlp_spec(*PAPER_SIZE) == {"kind": "mlp"} == DeformationField().spec()
+    assert recon.resolve_config("e4dgs").train.deform_field.spec() == {"kind": "mlp"}
+    cfg = recon.resolve_config("e4dgs", overrides={"train.deform_field.depth": 4, "train.deform_field.width": 128})
+    assert cfg.train.deform_field.spec() == {"kind": "mlp", "depth": 4, "width": 128}
+    assert cfg.train.deform_field.spec() == mlp_spec(4, 128)        # the config writes what the field writes
+
+
+@pytest.mark.parametrize("key, value", [("depth", 2), ("depth", 17), ("depth", 4.5), ("width", 4), ("width", 2048)])
+def test_sizes_out_of_range_are_refused_by_name(key, value):
+    with pytest.raises(ConfigError, match=key):
+        recon.resolve_config("e4dgs", overrides={f"train.deform_field.{key}": value})
+
+
+def test_precision_is_measured_for_the_size_it_runs(tmp_path):
+    sizes = []
+
+    def timer(device, size=PAPER_SIZE):
+        sizes.append(size)
+        return {"float32": 1.0, "bfloat16": 2.0} if size == PAPER_SIZE else {"float32": 2.0, "bfloat16": 1.0}
+    cache = tmp_path / "p.json"
+    assert prec.resolve_precision("auto", "cpu", cache=cache, timer=timer).dtype == "float32"
+    small = prec.resolve_precision("auto", "cpu", cache=cache, timer=timer, size=(4, 128))
+    assert small.dtype == "bfloat16" and small.machine.endswith("| mlp 4x128")
+    assert sizes == [PAPER_SIZE, (4, 128)]
+    assert prec.resolve_precision("auto", "cpu", cache=cache, timer=timer, size=(4, 128)).source == "cached"
+    ms = prec.time_deformation(torch.device("cpu"), n_points=64, repeats=1, size=(3, 16))
+    assert set(ms) == {"float32", "bfloat16"} and all(v > 0 for v in ms.values())
+
+
+def test_a_small_field_trains_saves_and_loads_as_itself(motion_scene, tmp_path):
+    over = {"train.iterations": 12, "train.warm_up": 4, "train.scale_schedule": False, "train.init.n_points_object": 300,
+            "train.snapshots": [1.0], "train.densify.enabled": False, "train.precision": "float32", "train.device": "cpu",
+            "train.deform_field.depth": 4, "train.deform_field.width": 32}
+    model = recon.fit(motion_scene, "d3dgs", overrides=over, out_dir=tmp_path / "run", progress=False).model
+    assert model.meta.deform_field == {"kind": "mlp", "depth": 4, "width": 32}
+    assert model.deform.warp.weight.abs().max() > 0                    # the heads learned
+    loaded = recon.load(tmp_path / "run")
+    assert (loaded.deform.depth, loaded.deform.width) == (4, 32)
+    assert torch.equal(loaded.render(0, 0.7), model.render(0, 0.7))
