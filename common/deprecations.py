@@ -49,6 +49,7 @@ BENCH_PRESETS = {"paper_gpu": ("paper", {"train.device": "cuda", "train.backend"
 
 REGISTRY: tuple[Deprecated, ...] = (
     *(Deprecated("module", f"simulator.{m}", f"eventio.{m}") for m in _MOVED_TO_EVENTIO),
+    Deprecated("module", "simulator.event_pictures", "eventio.representations"),
     Deprecated("command", "view", "draw-events"),
     *(Deprecated("option", old, new) for old, new in _OPTIONS.items()),
     *(Deprecated("config", old, f"{kind}/{new}") for old, (kind, new) in CONFIG_NAMES.items()),

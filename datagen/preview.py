@@ -15,7 +15,7 @@ from scene_format.reader import SceneDataset
 from common.imageio import write_png
 from common.metrics import psnr
 from eventio.h5io import read_window
-from simulator.event_pictures import event_frame
+from eventio.representations import event_frame
 
 
 def _label(img: np.ndarray, text: str) -> np.ndarray:

@@ -3,8 +3,9 @@
 
     ev = EventFile("data/quick/lego/events/cam0.h5")      # validated once (eventio.event_check)
     ev.n, ev.width, ev.height, ev.t_offset_us
+    ev.sensor                       # eventio.sensor.SensorRecord: thresholds, refractory period, every field
     ev.sensor_fields()              # {name: value} of the sensor model stored with the events
-                                    # (typed and range-checked: simulator.event_file.sensor_of)
+                                    # (the simulator's whole typed config: simulator.event_file.sensor_of)
     t = ev.times(i0, i1)            # [i1 - i0] int64 absolute microseconds
     x, y, p = ev.rows(i0, i1)       # uint16, uint16, int8 in {-1, +1}
     i0, i1 = ev.indices(t0, t1)     # index range of events with t0 <= t < t1 (through ms_to_idx)
@@ -21,6 +22,7 @@ import yaml
 
 from eventio.events import EventStream
 from eventio.h5io import EventFileError, read_slice, file_info, open_checked, window_indices
+from eventio.sensor import SensorRecord
 
 
 class EventFile:
@@ -44,6 +46,19 @@ class EventFile:
         if self._cols is None and self.n * self.BYTES_PER_EVENT <= max_bytes:
             self._cols = {k: self._g[k][()] for k in ("t", "x", "y", "p")}
         return self._cols is not None
+
+    _sensor: SensorRecord | None = None
+
+    @property
+    def sensor(self) -> SensorRecord:
+        """The sensor the file says made its events (read and range-checked once; an EventFileError
+        naming the file when a stored value is out of range)."""
+        if self._sensor is None:
+            try:
+                self._sensor = SensorRecord.from_fields(self.sensor_fields())
+            except ValueError as exc:
+                raise EventFileError(f"{self.path}: the stored sensor is not valid ({exc})") from None
+        return self._sensor
 
     def sensor_fields(self, names: set[str] | None = None) -> dict:
         """The sensor parameters stored with the events: the YAML the writer saved, or else its

@@ -18,22 +18,14 @@ import numpy as np
 import torch
 
 from common.color import REC709_LUMA
-
-
-def count_map(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Sum of polarities per pixel: [H, W] float64 (x, y, p [N]; p in {-1, +1})."""
-    flat = np.asarray(y, np.int64) * width + np.asarray(x, np.int64)
-    return np.bincount(flat, weights=np.asarray(p, np.float64), minlength=width * height).reshape(height, width)
+from eventio.representations.count_image import count_image
 
 
 def event_maps(x, y, p, width: int, height: int, c_pos: float, c_neg: float) -> tuple[np.ndarray, np.ndarray]:
-    """(dE_gt [H, W] = sum p C^p in log units, triggered [H, W] bool: pixel has at least one event)."""
-    flat = np.asarray(y, np.int64) * width + np.asarray(x, np.int64)
-    pos = np.asarray(p) > 0
-    w = np.where(pos, c_pos, -c_neg)
-    de = np.bincount(flat, weights=w, minlength=width * height).reshape(height, width)
-    hits = np.bincount(flat, minlength=width * height).reshape(height, width) > 0
-    return de, hits
+    """(dE_gt [H, W] = sum p C^p in log units, triggered [H, W] bool: pixel has at least one event),
+    from the window's ON and OFF count images."""
+    on, off = count_image(x, y, p, width, height, split=True)
+    return c_pos * on - c_neg * off, (on + off) > 0
 
 
 def gt_counts(de_gt: np.ndarray, triggered: np.ndarray, c_ref: float, noise_sigma: float,

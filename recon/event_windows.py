@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simulator.event_file import EventFile
+from eventio.event_file import EventFile
 from eventio.h5io import EventFileError
 
 _TIE_PAD = 1024   # extra rows read past the window to include events sharing its end time
@@ -32,10 +32,10 @@ class EventWindow:
 
 
 class EventSource(EventFile):
-    """One camera's event file (simulator.event_file.EventFile: the file and its typed sensor), with ESS windows cut by event index."""
+    """One camera's event file (eventio.EventFile: the file and its sensor record), with ESS windows cut by event index."""
 
     def thresholds(self) -> tuple[float, float]:
-        """The sensor's nominal contrast thresholds (C+, C-), from the stored simulator config."""
+        """The sensor's nominal contrast thresholds (C+, C-), from the file's sensor record."""
         return float(self.sensor.pos_threshold), float(self.sensor.neg_threshold)
 
     def window(self, camera: int, i0: int, n: int) -> EventWindow:

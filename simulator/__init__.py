@@ -2,8 +2,8 @@
 The event stream type and the file formats are `eventio`'s (re-exported here for the simulator's API).
 
 `EventSimulator`, `FrameError` and `simulate` load the simulator's numba kernels when first used, so
-reading a sensor's config (`simulator.config`, which a scene's config holds) or drawing events
-(`simulator.event_pictures`) does not compile or import them.
+reading a sensor's config (`simulator.config`, which a scene's config holds) does not compile or
+import them.
 """
 import common  # noqa: F401  (first: it sets the OpenMP wait policy before torch or numba loads)
 from eventio.events import EVENT_DTYPE, EventStream, EventValidationError, empty_events, make_events, to_torch, validate_events

@@ -147,7 +147,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         t_us = read_timestamps(args.timestamps, len(files))
     else:
         check_no_gaps(files)
-        from simulator.event_pictures import parse_time_us
+        from eventio.representations import parse_time_us
 
         try:
             t0 = parse_time_us(args.t0)
@@ -214,7 +214,7 @@ def run_view(args: argparse.Namespace) -> int:
     from eventio.h5io import EventFileError
     import numpy as np
 
-    from simulator.event_pictures import annotate, event_frame, overlay_flow, parse_time_us, save_video, window_starts
+    from eventio.representations import annotate, event_frame, overlay_flow, parse_time_us, save_video, window_starts
 
     try:
         ev = EventFile(args.events)      # every event and the ms index checked once (windows trust the index)

@@ -24,15 +24,15 @@ class SimulatorConfig:
     # Log response. "log": log(I + log_eps) (as ESIM). "linlog": v2e's lin-log on digital numbers
     # DN = linlog_dn_per_unit * I: linear (DN * log(thr)/thr) below thr = linlog_threshold_dn DN, log above.
     log_mode: Literal["log", "linlog"] = "log"
-    log_eps: float = 1e-3
-    linlog_threshold_dn: float = 20.0
-    linlog_dn_per_unit: float = 255.0
+    log_eps: float = 1e-3  # log mode: linear intensity added before the log
+    linlog_threshold_dn: float = 20.0  # linlog mode: digital numbers below which the response is linear
+    linlog_dn_per_unit: float = 255.0  # linlog mode: digital numbers per unit of linear intensity
 
     # Contrast thresholds (log units) and per-pixel mismatch: C ~ Normal(C, sigma), clamped to >= min.
     pos_threshold: float = 0.2
-    neg_threshold: float = 0.2
-    threshold_sigma: float = 0.0
-    threshold_min: float = 0.01
+    neg_threshold: float = 0.2  # nominal OFF contrast threshold, log units
+    threshold_sigma: float = 0.0  # pixel-to-pixel spread of both thresholds (std, log units; 0: none)
+    threshold_min: float = 0.01  # a pixel's thresholds are clamped to at least this
 
     # Photoreceptor low-pass (v2e): first-order IIR with cutoff scaled by intensity; 0 = off.
     lowpass_cutoff_hz: float = 0.0
@@ -40,23 +40,23 @@ class SimulatorConfig:
     refractory_us: int = 0
     # Leak: reference drifts down at leak_rate_hz ON events per second (log-normal per-pixel spread).
     leak_rate_hz: float = 0.0
-    leak_rate_sigma_decades: float = 0.1
+    leak_rate_sigma_decades: float = 0.1  # per-pixel spread of the leak rate (log-normal, decades)
     # Shot noise: Poisson ON+OFF events at this total rate per pixel in the dark (x0.25 at white, v2e).
     shot_noise_rate_hz: float = 0.0
     # Hot pixels: this fraction of pixels emits ON events as a Poisson process at hot_pixel_rate_hz.
     hot_pixel_fraction: float = 0.0
-    hot_pixel_rate_hz: float = 0.0
+    hot_pixel_rate_hz: float = 0.0  # each hot pixel's ON event rate
 
     # Shot noise's share of ON events (v2e: half), its scale at white against the dark (v2e: 0.25: noise
     # depends on the light, more in dark pixels), and the per-pixel spread of its rate (log-normal,
     # decades; a fixed pattern, as the leak's).
     shot_noise_on_fraction: float = 0.5
-    shot_noise_white_factor: float = 0.25
-    shot_noise_sigma_decades: float = 0.0
+    shot_noise_white_factor: float = 0.25  # shot noise at white against the dark (v2e: 0.25)
+    shot_noise_sigma_decades: float = 0.0  # per-pixel spread of the shot-noise rate (log-normal, decades; 0: none)
 
     # ON and OFF threshold mismatch apart (log units): None takes threshold_sigma (one sigma for both).
     pos_threshold_sigma: float | None = None
-    neg_threshold_sigma: float | None = None
+    neg_threshold_sigma: float | None = None  # OFF threshold spread (None: threshold_sigma)
     # Readout (simulator.readout), after the pixels: each event reaches the output latency_us later,
     # plus a jitter drawn from Normal(0, latency_jitter_us) truncated at +-3 sigma (never before the
     # crossing); a semi-synchronous readout reports timestamps in steps of readout_period_us (rounded up);
@@ -64,10 +64,10 @@ class SimulatorConfig:
     # an event waits for the ones before it, and is dropped when its wait would exceed max_readout_delay_us
     # (0: never dropped). 0 = off for each.
     latency_us: float = 0.0
-    latency_jitter_us: float = 0.0
-    readout_period_us: int = 0
-    max_event_rate_hz: float = 0.0
-    max_readout_delay_us: int = 0
+    latency_jitter_us: float = 0.0  # std of the latency's jitter, truncated at +-3 sigma (0: none)
+    readout_period_us: int = 0  # semi-synchronous readout: timestamps rounded up to this step (0: asynchronous)
+    max_event_rate_hz: float = 0.0  # bandwidth limit of the readout, events per second (0: unlimited)
+    max_readout_delay_us: int = 0  # an event waiting longer than this is dropped (0: never)
 
     def __post_init__(self):
         def need(ok: bool, field: str, what: str):
@@ -151,6 +151,14 @@ class SimulatorConfig:
     def is_noise_free(self) -> bool:
         """No random events (shot noise, hot pixels); leak, mismatch, low-pass, refractory are deterministic."""
         return not (self.has_shot_noise or self.has_hot_pixels)
+
+    def sensor_record(self):
+        """This sensor as the plain record an event file holds (eventio.sensor.SensorRecord)."""
+        from dataclasses import asdict
+
+        from eventio.sensor import SensorRecord
+
+        return SensorRecord.from_fields(asdict(self))
 
 
 # Ranges of the numeric fields (common.config.check_bounds: refused when loaded, naming the key).

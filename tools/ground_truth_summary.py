@@ -51,7 +51,7 @@ def picture(scene: Path, camera: int, frame: int, out: Path) -> Path:
     from common.flow import depth_to_rgb, flow_to_rgb
     from common.imageio import write_png
     from scene_format.reader import SceneDataset
-    from simulator.event_pictures import event_frame, overlay_flow
+    from eventio.representations import event_frame, overlay_flow
     from viewer.panels import ScenePanels, to_uint8_rgb
 
     d = SceneDataset(scene)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from eventio.event_file import EventFile
-from simulator.event_pictures import annotate, event_frame
+from eventio.representations import annotate, event_frame
 from viewer.app import quiet_aborted_handshakes, server_url
 
 DEFAULT_WINDOW_US = 2_000

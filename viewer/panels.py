@@ -14,7 +14,7 @@ import numpy as np
 
 from scene_format.reader import FrameRecord, SceneDataset
 from eventio.event_file import EventFile
-from simulator.event_pictures import annotate, event_frame
+from eventio.representations import annotate, event_frame
 
 
 @dataclass(frozen=True)

@@ -71,7 +71,7 @@ class E4DGS(Method):
         src = self.sampler.sources[0]
         self.c_pos, self.c_neg = src.thresholds()
         self.c_ref = 0.5 * (self.c_pos + self.c_neg)
-        sensor = src.sensor   # the SimulatorConfig stored with the events: the response L_hat must match
+        sensor = src.sensor   # the file's sensor record (eventio.sensor): the response L_hat must match
         self.response = {"mode": sensor.log_mode, "eps": float(sensor.log_eps),
                          "linlog_threshold_dn": float(sensor.linlog_threshold_dn),
                          "dn_per_unit": float(sensor.linlog_dn_per_unit)}

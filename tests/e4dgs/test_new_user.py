@@ -480,7 +480,7 @@ def test_check_names_an_unfinished_scene_and_folders_that_are_not_scenes(motion_
 def test_numbers_that_overflow_or_are_infinite_are_refused_by_name():
     import recon
     from common.config import ConfigError
-    from simulator.event_pictures import parse_time_us
+    from eventio.representations import parse_time_us
 
     for text in ("1e400", "-1e400", "1e13s"):
         with pytest.raises(ValueError, match="out of range"):
@@ -515,7 +515,7 @@ def test_an_output_inside_its_input_is_refused(motion_scene, tmp_path, capsys):
 
 def test_a_sliding_window_video_shows_the_last_events():
     """`e4dgs draw-events --window 5ms` on a 19.7 ms stream: four frames, the last one ending at the stream's end."""
-    from simulator.event_pictures import window_starts
+    from eventio.representations import window_starts
 
     assert window_starts(0, 19_700, 5000, 5000) == [0, 5000, 10_000, 14_700]
     assert window_starts(0, 20_000, 5000, 5000) == [0, 5000, 10_000, 15_000]

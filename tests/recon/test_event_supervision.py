@@ -9,17 +9,18 @@ import torch
 import recon
 from scene_format.reader import SceneDataset
 from recon import event_supervision as ev
+from eventio.representations import count_image
 from common.color_correction import correct_colors, fit_gain_offset
 from recon.event_windows import EventSource
 from recon.methods.e4dgs import E4DGS, PAPER_PIXELS
 from eventio.h5io import read_events
 
 
-def test_count_map_is_the_per_pixel_sum_of_polarities(rng):
+def test_count_image_is_the_per_pixel_sum_of_polarities(rng):
     n = 5000
     x, y = rng.integers(0, 7, n), rng.integers(0, 5, n)
     p = rng.choice([-1, 1], n)
-    cm = ev.count_map(x, y, p, 7, 5)
+    cm = count_image(x, y, p, 7, 5)
     expected = np.zeros((5, 7))
     for xi, yi, pi in zip(x, y, p):
         expected[yi, xi] += pi
@@ -143,8 +144,8 @@ def test_windows_hold_the_drawn_count_and_match_the_file(motion_scene, in_memory
         inside = (allev["t"] > w.t_start_us) & (allev["t"] <= w.t_end_us)
         assert len(w) == inside.sum() and abs(len(w) - n) <= np.sum(allev["t"] == w.t_end_us) + \
             np.sum(allev["t"] == w.t_start_us)
-        np.testing.assert_array_equal(ev.count_map(w.x, w.y, w.p, 64, 48),
-                                      ev.count_map(allev["x"][inside], allev["y"][inside], allev["p"][inside], 64, 48))
+        np.testing.assert_array_equal(count_image(w.x, w.y, w.p, 64, 48),
+                                      count_image(allev["x"][inside], allev["y"][inside], allev["p"][inside], 64, 48))
     src.close()
 
 

@@ -2,7 +2,7 @@
 import numpy as np
 
 from e4dgs.cli import main
-from simulator.event_pictures import event_frame, overlay_flow
+from eventio.representations import event_frame, overlay_flow
 
 
 def test_arrows_start_at_the_pixel_centres_and_point_along_the_flow():
