@@ -1,7 +1,7 @@
 """Add dynamic-region masks (datagen.dynamic) to scenes generated before they existed, without
 rendering again: the scene is built in Blender from its scene.yaml, every test view's pixels are
 cast into it and tracked over the clip, and the masks go into the scene and its speed variants.
-New scenes get them from `e4dgs dataset` (the same SceneJob.measure_dynamic).
+New scenes get them from `e4dgs dataset` (the same datagen.scene_plan.measure_dynamic, on the same plan).
 
     python -m datagen.add_masks data/quick/hinge          # `e4dgs masks data/quick` runs this per scene
 """
@@ -14,7 +14,8 @@ from pathlib import Path
 from datagen import render as R
 from scene_format.reader import SceneDataset
 from datagen.dynamic import write_masks
-from datagen.generate import SceneJob
+from datagen.scene_folder import test_masks
+from datagen.scene_plan import make_plan, measure_dynamic
 
 
 def add_masks(scene_dir: Path) -> list[Path]:
@@ -25,15 +26,14 @@ def add_masks(scene_dir: Path) -> list[Path]:
     import numpy as np
 
     poses = np.stack([c.c2w for c in ds.cameras]) if cfg.source.cameras else None     # as filmed
-    job = SceneJob(cfg, scene_dir.parent, ds.manifest.get("preset", "custom"), progress=False, folder=scene_dir.name,
-                   poses=poses)
-    R.build_scene(cfg, job.intr)
-    job.measure_dynamic()
+    plan = make_plan(cfg, scene_dir.parent, ds.manifest.get("preset", "custom"), folder=scene_dir.name, poses=poses)
+    R.build_scene(cfg, plan.intr)
+    measure_dynamic(plan)
     written = []
-    for j in job.jobs:
-        if (j.dir / "manifest.json").exists():
-            write_masks(j.dir, {v: m for v, m in j.dynamic.items() if v[1] % cfg.frames.test_every == 0})
-            written.append(j.dir)
+    for p in plan.plans:
+        if (p.dir / "manifest.json").exists():
+            write_masks(p.dir, test_masks(p))
+            written.append(p.dir)
     return written
 
 

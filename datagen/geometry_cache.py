@@ -5,14 +5,14 @@ start on one core (docs/design/dataset.md).
 
 The cache is one atomic .npz (common.checkpoint.JobCheckpoint, no pickles) tied to the scene's config
 fingerprint and this module's FORMAT; any mismatch or unreadable file is dropped and the geometry
-measured again. Per job (the scene, then its speed variants, keyed by their folder names):
+measured again. Per plan (the scene, then its speed variants, keyed by their folder names):
 
-    <job>/blur__present                  0 / 1
-    <job>/blur__levels, n_frames, target_px (nan: declared by exposure), fit_factor   [L]
-    <job>/blur__manifest                 JSON text
-    <job>/blur__median__<level>          [C, J] float
-    <job>/win__<level>                   [W, 3] int (blurred frame j, first, last)
-    dynamic__views [V, 2] int (camera, kept index); dynamic__masks [V, H, W] bool (shared by every job)
+    <plan>/blur__present                  0 / 1
+    <plan>/blur__levels, n_frames, target_px (nan: declared by exposure), fit_factor   [L]
+    <plan>/blur__manifest                 JSON text
+    <plan>/blur__median__<level>          [C, J] float
+    <plan>/win__<level>                   [W, 3] int (blurred frame j, first, last)
+    dynamic__views [V, 2] int (camera, kept index); dynamic__masks [V, H, W] bool (shared by every plan)
     rendered [R] int; render_plan JSON text (shared)
 """
 from __future__ import annotations
@@ -67,32 +67,32 @@ def _blur_from(state: dict, p: str) -> BlurReport | None:
     return BlurReport(choices, windows, json.loads(str(state[f"{p}blur__manifest"])), medians)
 
 
-def save(scene_dir: Path, fingerprint: str, jobs) -> None:
-    """Store what `jobs` (the scene's SceneJob first, then its variants) measured."""
-    first = jobs[0]
+def save(scene_dir: Path, fingerprint: str, plans) -> None:
+    """Store what `plans` (datagen.scene_plan.ScenePlan: the scene first, then its variants) measured."""
+    first = plans[0]
     views = sorted(first.dynamic)
     state = {"dynamic__views": np.array(views, dtype=np.int64).reshape(-1, 2),
              "dynamic__masks": np.array([first.dynamic[v] for v in views], dtype=bool),
              "rendered": np.asarray(first.rendered, dtype=np.int64),
              "render_plan": json.dumps(first.render_plan, default=_json_default)}
-    for job in jobs:
-        state.update(_blur_state(job.blur, f"{job.dir.name}/"))
+    for p in plans:
+        state.update(_blur_state(p.blur, f"{p.dir.name}/"))
     JobCheckpoint(Path(scene_dir) / FILE_NAME, f"{FORMAT}:{fingerprint}").save(state)
 
 
-def load(scene_dir: Path, fingerprint: str, jobs) -> bool:
-    """Restore the measurements into `jobs` if a cache of this config is there (True), else False."""
+def load(scene_dir: Path, fingerprint: str, plans) -> bool:
+    """Restore the measurements into `plans` if a cache of this config is there (True), else False."""
     state = JobCheckpoint(Path(scene_dir) / FILE_NAME, f"{FORMAT}:{fingerprint}").load()
-    if state is None or not all(f"{job.dir.name}/blur__present" in state for job in jobs):
+    if state is None or not all(f"{p.dir.name}/blur__present" in state for p in plans):
         return False
     views = [tuple(int(x) for x in v) for v in state["dynamic__views"]]
     masks = state["dynamic__masks"]
-    rendered, plan = state["rendered"], json.loads(str(state["render_plan"]))
-    for job in jobs:
-        job.blur = _blur_from(state, f"{job.dir.name}/")
-        job.windows = job.blur.windows if job.blur is not None else {}
-        job.dynamic = {v: masks[i] for i, v in enumerate(views)}
-        job.rendered, job.render_plan = rendered, plan
+    rendered, render_plan = state["rendered"], json.loads(str(state["render_plan"]))
+    for p in plans:
+        p.blur = _blur_from(state, f"{p.dir.name}/")
+        p.windows = p.blur.windows if p.blur is not None else {}
+        p.dynamic = {v: masks[i] for i, v in enumerate(views)}
+        p.rendered, p.render_plan = rendered, render_plan
     return True
 
 

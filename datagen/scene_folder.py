@@ -1,8 +1,8 @@
 """A scene folder's files beside the render loop (datagen.generate.SceneJob): the kept frames, the
 metadata (cameras.json, transforms, scene.yaml, masks, previews), the manifest with every file's
 SHA-256 (written last: a folder without it is incomplete), the speed variants' manifests and the
-extra event formats. Each writer reads the job's state (`job`: a datagen.generate.SceneJob) and
-writes; none renders or simulates.
+extra event formats. Each writer takes the scene's plan (`plan`: a datagen.scene_plan.ScenePlan)
+and writes; none renders or simulates.
 """
 from __future__ import annotations
 
@@ -90,82 +90,89 @@ def write_kept(folder: Path, k: int, j: int, rgb: np.ndarray) -> None:
     write_png_srgb(folder / "gray" / f"cam{k}" / f"{name}.png", rec709_luma(rgb))
 
 
-def write_exports(job) -> None:
+def write_exports(plan) -> None:
     """The extra formats the config asks for, of the scene and its variants (datagen.exports)."""
-    if job.cfg.formats:
+    if plan.cfg.formats:
         from datagen.exports import ensure_exports
 
-        for job in job.jobs:
-            ensure_exports(job.dir, job.cfg.formats)
+        for p in plan.plans:
+            ensure_exports(p.dir, p.cfg.formats)
 
 
-def write_metadata(job, seconds: dict) -> None:
-    cfg, d = job.cfg, job.dir
+def write_metadata(plan, seconds: dict, ground_truth: dict | None = None) -> None:
+    """cameras.json, transforms, scene.yaml, masks, previews and, last, manifest.json of one folder
+    (ground_truth: the manifest's entry, when the scene wrote ground truth)."""
+    cfg, d = plan.cfg, plan.dir
     t_write = time.perf_counter()
     C = cfg.camera.n_cameras
     cameras = {
         "convention": "OpenCV camera axes (x right, y down, z forward); c2w = camera-to-world. "
                       "Pixel (u, v) centre samples the image plane at (u + 0.5, v + 0.5).",
-        "intrinsics": job.intr.to_dict(),
-        "cameras": [{"camera": k, "timestamps_us": job.t_us.tolist(),
-                     "c2w_opencv": np.round(job.poses[k], 12).tolist()} for k in range(C)],
+        "intrinsics": plan.intr.to_dict(),
+        "cameras": [{"camera": k, "timestamps_us": plan.t_us.tolist(),
+                     "c2w_opencv": np.round(plan.poses[k], 12).tolist()} for k in range(C)],
     }
     write_text_atomic(d / "cameras.json", json.dumps(cameras))
-    write_transforms(job)
-    write_text_atomic(d / "scene.yaml", f"# resolved scene config (preset: {job.preset})\n" + dump_config(cfg))
-    mid = len(job.kept) // 2
+    write_transforms(plan)
+    write_text_atomic(d / "scene.yaml", f"# resolved scene config (preset: {plan.preset})\n" + dump_config(cfg))
+    mid = len(plan.kept) // 2
     window = max(int(round(cfg.frames.keep_every * 1e6 / cfg.real_fps)), int(round(1000 / cfg.speed)))
-    blur = job.blur.manifest if job.blur else None
+    blur = plan.blur.manifest if plan.blur else None
     if blur:
-        for level in job.windows:
-            blur["levels"][level]["psnr_vs_sharp_db"] = blur_psnr(d, level, C, len(job.kept))
-    labels = {level: [f"{m:.1f} px" for m in job.blur.view_median_px[level][:, mid]] for level in job.windows}
-    if job._is_variant:
+        for level in plan.windows:
+            blur["levels"][level]["psnr_vs_sharp_db"] = blur_psnr(d, level, C, len(plan.kept))
+    labels = {level: [f"{m:.1f} px" for m in plan.blur.view_median_px[level][:, mid]] for level in plan.windows}
+    if plan.is_variant:
         labels = {f"x{cfg.speed:g} {lv} {cfg.blur.exposure_ms[lv]:g} ms": v for lv, v in labels.items()}
-    if job.dynamic:
+    if plan.dynamic:
         from datagen.dynamic import write_masks
 
-        write_masks(d, {v: m for v, m in job.dynamic.items() if v[1] % cfg.frames.test_every == 0})
-    contact_sheet(d, C, mid, int(job.t_us[job.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png",
-                  folders=list(job.windows), dynamic=[job.dynamic.get((k, mid)) for k in range(C)])
-    if job.variants:
-        speed_sheet(d, [v.dir for v in job.variants], mid, d / "preview" / "speeds.png")
+        write_masks(d, test_masks(plan))
+    contact_sheet(d, C, mid, int(plan.t_us[plan.kept[mid]]), window, labels, d / "preview" / "contact_sheet.png",
+                  folders=list(plan.windows), dynamic=[plan.dynamic.get((k, mid)) for k in range(C)])
+    if plan.variants:
+        speed_sheet(d, [v.dir for v in plan.variants], mid, d / "preview" / "speeds.png")
     seconds["write"] += time.perf_counter() - t_write
     n_events = [read_info(d / "events" / f"cam{k}.h5")["n_events"] for k in range(C)]
     files = sorted(p for p in d.rglob("*") if p.is_file() and not p.name.startswith(".") and p.name != "manifest.json")
     manifest = {
-        "scene": cfg.name, "preset": job.preset, "format_version": FORMAT_VERSION,
-        "config_sha256": job.fingerprint, "seed": cfg.seed, "git_commit": _git_commit(),
+        "scene": cfg.name, "preset": plan.preset, "format_version": FORMAT_VERSION,
+        "config_sha256": plan.fingerprint, "seed": cfg.seed, "git_commit": _git_commit(),
         "versions": versions(), "created_unix": int(time.time()),
-        "counts": {"cameras": C, "timestamps": cfg.n_timestamps, "kept_frames_per_camera": len(job.kept),
-                   "test_frames_per_camera": int(np.sum(np.arange(len(job.kept)) % cfg.frames.test_every == 0)),
+        "counts": {"cameras": C, "timestamps": cfg.n_timestamps, "kept_frames_per_camera": len(plan.kept),
+                   "test_frames_per_camera": int(np.sum(np.arange(len(plan.kept)) % cfg.frames.test_every == 0)),
                    "events_per_camera": n_events},
         "events_per_second_per_camera": [round(n / cfg.real_duration_s) for n in n_events],
         "blur": blur,
-        **({"ground_truth": job.ground_truth} if job.ground_truth else {}),
-        **speed_manifest(job),
-        **({"render_plan": job.render_plan} if job.render_plan.get("adaptive_px") else {}),
+        **({"ground_truth": ground_truth} if ground_truth else {}),
+        **speed_manifest(plan),
+        **({"render_plan": plan.render_plan} if plan.render_plan.get("adaptive_px") else {}),
         "seconds": {k: round(v, 3) for k, v in seconds.items()},
         "files": {str(p.relative_to(d)): {"bytes": p.stat().st_size, "sha256": sha256_file(p)} for p in files},
     }
     write_text_atomic(d / "manifest.json", json.dumps(manifest, indent=1))
 
-def speed_manifest(job) -> dict:
+def test_masks(plan) -> dict:
+    """{(camera, kept index): [H, W] bool} of the plan's dynamic masks at its test views."""
+    return {v: m for v, m in plan.dynamic.items() if v[1] % plan.cfg.frames.test_every == 0}
+
+
+def speed_manifest(plan) -> dict:
     """A variant's speed (factor, exposure, frames it integrates, real clip length); a scene's variants."""
-    cfg = job.cfg
+    cfg = plan.cfg
     out = {}
-    if job._is_variant:
+    if plan.is_variant:
         out["speed"] = {"factor": cfg.speed, "exposure_ms": cfg.speeds.exposure_ms,
-                        "n_frames": job.blur.manifest["levels"][SHUTTER_LEVEL]["n_frames"],
+                        "n_frames": plan.blur.manifest["levels"][SHUTTER_LEVEL]["n_frames"],
                         "render_fps": cfg.render.fps, "real_fps": cfg.real_fps,
                         "real_duration_s": cfg.real_duration_s, "scene": cfg.name,
                         "construction": "time compression: the scene's rendered frames at timestamps divided by "
                                         "the factor; events simulated again at those timestamps; blurred frames of "
                                         "a fixed real-time exposure"}
-    if job.variants:
-        out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in job.variants}
+    if plan.variants:
+        out["speed_variants"] = {f"x{v.cfg.speed:g}": v.dir.name for v in plan.variants}
     return out
 
-def write_transforms(job) -> None:
-    _write_transforms_file(job.dir, job.intr, job.t_us, job.poses, job.kept, job.windows, job.cfg.frames.test_every,
-                     job.cfg.render.fps)
+def write_transforms(plan) -> None:
+    _write_transforms_file(plan.dir, plan.intr, plan.t_us, plan.poses, plan.kept, plan.windows, plan.cfg.frames.test_every,
+                     plan.cfg.render.fps)
