@@ -5,7 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from common.argtypes import DeprecatedOption, add_main_input, add_ray_arguments, float_in, int_in, name_list, ray_options
+from common.argtypes import (DeprecatedOption, add_main_input, add_ray_arguments, float_in, int_in, name_list, ray_options,
+                             seed_list)
 from common.fileio import output_inside_input
 
 
@@ -29,8 +30,9 @@ def add_bench_parser(sub) -> None:
                    help="what each of --seeds varies, comma-separated among train (training's random draws), init "
                         "(the initial points) and noise (the events: seed k trains on the dataset's k-th noise "
                         "realisation, data/<dataset>@noise<k>); default: the preset's seed_axes (train,init)")
-    p.add_argument("--ablation-seeds", default=None,
-                   help="comma-separated training seeds for the ablation (default: the preset's ablation.seeds)")
+    p.add_argument("--ablation-seeds", type=seed_list, default=None,
+                   help="comma-separated training seeds for the ablation, e.g. 0,1,2 (default: the preset's "
+                        "ablation.seeds); --seeds is a count, these are the seeds themselves")
     p.add_argument("--seeds", type=int_in(1, 100, "training seeds per cell"), default=None,
                    help="train every main cell at seeds 0 .. N-1 (default: the preset's seeds, 1): the tables give the "
                         "mean and standard deviation over seeds and call differences within the spread ties")
@@ -213,12 +215,7 @@ def run_bench_cli(args: argparse.Namespace) -> int:
         raise SystemExit(f"error: {exc}") from None
     name = Path(args.preset).stem
     if args.ablation_seeds:
-        try:
-            seeds = tuple(int(s) for s in args.ablation_seeds.split(",") if s.strip())
-            cfg = replace(cfg, ablation=replace(cfg.ablation, seeds=seeds))
-        except (ValueError, ConfigError) as exc:
-            raise SystemExit(f"error: --ablation-seeds: expected distinct integers >= 0 separated by commas "
-                             f"({exc})") from None
+        cfg = replace(cfg, ablation=replace(cfg.ablation, seeds=args.ablation_seeds))
     if args.seeds is not None:
         cfg = replace(cfg, seeds=args.seeds)
     if args.seed_axes is not None:

@@ -76,6 +76,20 @@ def seed_int(text: str) -> int:
 seed_int.bounds = (0, SEED_MAX)
 
 
+def seed_list(text: str) -> tuple[int, ...]:
+    """Comma-separated distinct seeds (each an integer in 0 .. 2^63 - 1): '0,1,2' -> (0, 1, 2)."""
+    items = [x.strip() for x in text.split(",")]
+    if not all(items):
+        raise argparse.ArgumentTypeError(f"expected distinct integer seeds separated by commas, got {text!r}")
+    seeds = tuple(seed_int(x) for x in items)
+    if len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"a seed given twice in {text!r}")
+    return seeds
+
+
+seed_list.bounds = (0, SEED_MAX)
+
+
 def name_list(text: str) -> list[str]:
     """A comma-separated list of names (scenes, cells, studies): at least one, none blank."""
     names = [x.strip() for x in text.split(",")]

@@ -23,12 +23,12 @@ class RenderConfig:
     motion needs, at most adaptive_px of motion (p99 of the scene's surface points) between two rendered
     frames and at most max_stride frames apart, the kept frames always (datagen.temporal_sampling)."""
     engine: Literal["workbench", "cycles", "eevee"] = "workbench"  # Blender's renderer: workbench (rasteriser, noise-free), cycles or eevee
-    samples: int = 8
-    fps: float = 3000.0
-    width: int = 346
-    height: int = 260
-    adaptive_px: float = 0.0
-    max_stride: int = 8
+    samples: int = 8  # render samples per pixel (Cycles / Eevee; Workbench's anti-aliasing)
+    fps: float = 3000.0  # rendered frames per second of scene time
+    width: int = 346  # image width, pixels
+    height: int = 260  # image height, pixels
+    adaptive_px: float = 0.0  # render only where the image moves more than this many pixels since the last render, blend the rest (0: every frame)
+    max_stride: int = 8  # adaptive rendering: at most this many frames between rendered ones
 
     def __post_init__(self):
         check_positive(self, "samples", "fps", "width", "height", "max_stride")
@@ -53,11 +53,11 @@ class ShakeConfig:
     rms_deg is the RMS rotation about the pan and tilt axes; roll gets roll_scale times that.
     rms_deg: 0 turns shake off.
     """
-    rms_deg: float = 0.0
-    min_hz: float = 4.0
-    max_hz: float = 25.0
-    components: int = 3
-    roll_scale: float = 0.5
+    rms_deg: float = 0.0  # RMS rotation of the shake, degrees (0: off)
+    min_hz: float = 4.0  # lowest shake frequency
+    max_hz: float = 25.0  # highest shake frequency
+    components: int = 3  # sine components summed per axis
+    roll_scale: float = 0.5  # roll's amplitude relative to pan and tilt
 
     def __post_init__(self):
         check_positive(self, "min_hz", "max_hz", "components")
@@ -77,14 +77,14 @@ class CameraRigConfig:
     its distance from the vertical axis through the target goes from radius to radius + radius_change.
     `shake` adds high-frequency rotation about each camera's own axes on top of the look-at pose.
     """
-    n_cameras: int = 6
-    radius: float = 4.0
-    height: float = 1.5
+    n_cameras: int = 6  # cameras of the rig
+    radius: float = 4.0  # distance of each camera from the target (scene units)
+    height: float = 1.5  # camera height above the target (scene units)
     target: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the point every camera looks at (scene units)
-    azimuth0_deg: float = 0.0
-    sweep_deg: float = 30.0
-    radius_change: float = 0.0
-    fov_x_deg: float = 50.0
+    azimuth0_deg: float = 0.0  # azimuth of camera 0 at the clip's start; the others evenly spaced
+    sweep_deg: float = 30.0  # azimuth each camera travels over the clip
+    radius_change: float = 0.0  # change of the radius over the clip (scene units)
+    fov_x_deg: float = 50.0  # horizontal field of view, degrees
     shake: ShakeConfig = field(default_factory=ShakeConfig)  # high-frequency rotation of each camera (off at rms_deg 0)
 
     def __post_init__(self):
@@ -101,9 +101,9 @@ class LightingConfig:
     (`shading: flat` shows unlit texture colours)."""
     shading: Literal["studio", "flat"] = "studio"  # studio: lit by the studio light; flat: unlit texture colours
     studio_light: str = "Default"  # the Workbench studio light's name
-    rotate_z_deg: float = 30.0
+    rotate_z_deg: float = 30.0  # rotation of the studio light about the vertical axis, degrees
     shadows: bool = True  # cast shadows from light_direction
-    shadow_intensity: float = 0.4
+    shadow_intensity: float = 0.4  # darkness of the cast shadows (0: none, 1: black)
     light_direction: tuple[float, float, float] = (0.4, -0.3, 0.85)  # the shadow light's direction (world, towards the light)
     cavity: bool = False  # Workbench's cavity shading (darkens creases)
     background: tuple[float, float, float] = (0.05, 0.05, 0.06)  # linear RGB of the empty background
@@ -117,8 +117,8 @@ class LightingConfig:
 class FramesConfig:
     """keep_every: store RGB frames at every n-th rendered timestamp. test_every: of those, every
     n-th one per camera is held out for testing (llffhold)."""
-    keep_every: int = 30
-    test_every: int = 8
+    keep_every: int = 30  # keep every this many rendered frames (sharp frames, blur centres)
+    test_every: int = 8  # every this many kept frames is a held-out test view
 
     def __post_init__(self):
         check_positive(self, "keep_every", "test_every")
@@ -145,9 +145,9 @@ class BlurConfig:
     """
     target_px: dict[str, float] = field(default_factory=dict)  # blur level -> target median blur length (px)
     exposure_ms: dict[str, float] = field(default_factory=dict)   # levels of a fixed exposure (real-time ms)
-    tolerance: float = 0.15
-    max_exposure_ms: float = 40.0
-    sample_stride_px: int = 4
+    tolerance: float = 0.15  # a level's measured blur may miss its target by this fraction
+    max_exposure_ms: float = 40.0  # longest exposure a blur level may take (real-time ms)
+    sample_stride_px: int = 4  # pixel stride of the surface samples the blur is measured on
     fit: bool = False  # take the closest exposure however far it lands, instead of refusing a level out of reach
 
     def __post_init__(self):
@@ -184,8 +184,8 @@ class SpeedConfig:
     image moves more than `max_px_per_frame` (p90) between rendered frames, is refused.
     """
     factors: tuple[float, ...] = ()  # speed factors of the variants written beside the scene (<scene>_x<f>)
-    exposure_ms: float = 2.0
-    max_px_per_frame: float = 2.0
+    exposure_ms: float = 2.0  # the variants' shutter (real-time ms) of their blurred frames
+    max_px_per_frame: float = 2.0  # refuse a variant whose image moves more than this between rendered frames (p90)
 
     def __post_init__(self):
         check_positive(self, "exposure_ms", "max_px_per_frame")
@@ -212,9 +212,9 @@ class SourceConfig:
     # built in code: the built-in scene whose builder (blender_scenes/<builtin>.py) makes this one, for a
     # scene YAML copied under a new name (`name: my_cubes`, `source: {builtin: cubes}`); "" = its name
     builtin: str = ""
-    frame_start: float | None = None
-    frame_end: float | None = None
-    fps: float | None = None
+    frame_start: float | None = None  # first animation frame of the file to use (None: the file's start)
+    frame_end: float | None = None  # last animation frame of the file to use (None: the file's end)
+    fps: float | None = None  # the file's animation frame rate (None: the file's own)
     rig: Literal["auto", "config"] = "auto"  # auto: place the rig around the file's animation; config: the camera section as given
     # camera objects of the file to use instead of the rig (their animated poses and their common lens)
     cameras: tuple[str, ...] = ()
@@ -244,9 +244,9 @@ class SceneConfig:
     name: str  # the scene's name and folder name
     kind: Literal["object", "room"]  # object (cameras outside, looking in) or room (cameras inside)
     description: str = ""  # what the scene shows (free text)
-    duration_s: float = 0.2
-    motion_strength: float = 1.0
-    seed: int = 0
+    duration_s: float = 0.2  # scene time of the clip, seconds (before a speed variant's factor)
+    motion_strength: float = 1.0  # scales every animated motion of the built-in scene (1: as written)
+    seed: int = 0  # the scene's random seed (textures, noise of the renders, the events unless sensor_seed)
     render: RenderConfig = field(default_factory=RenderConfig)  # the renderer and the frame rate and size
     camera: CameraRigConfig = field(default_factory=CameraRigConfig)  # the camera rig
     lighting: LightingConfig = field(default_factory=LightingConfig)  # the lighting

@@ -12,11 +12,15 @@ config, on each half: events, ON fraction, consecutive same polarity, the inter-
 event there is noise), and the realism report's two distances (Wasserstein-1 of log10 per-pixel
 rate and of log10 inter-event interval, eventio.realism).
 
-`--fit` searches thresholds (ON and OFF), refractory period and photoreceptor cutoff on the first
-half (the sum of the two distances, the static-pixel rate and the event count's log ratio), with the
+`--fit` searches thresholds (ON and OFF), refractory period and photoreceptor cutoff (`FIT_GRID`) on
+the first half (the sum of the two distances, the static-pixel rate's and the event count's log10
+ratios), with the
 leak rate set to the camera's static-pixel ON rate on the first half; the result is what
 configs/sensors/davis346.yaml holds. v2e's own presets are given as their parameters run through
-this simulator (not v2e itself).
+this simulator (not v2e itself). `--fit --wide` searches `WIDE_GRID` (thresholds from 0.2, their
+pixel-to-pixel spread, refractory 250-1000 us) and adds the inter-event-interval floor's (p0.1)
+log10 ratio to the objective: the measurement of whether the interval distance and floor can be
+met by the sensor's parameters (docs/results/sensors.md).
 """
 from __future__ import annotations
 
@@ -97,15 +101,25 @@ def run(configs: dict, frames: np.ndarray, t_us: np.ndarray, real, static: np.nd
     return out
 
 
-def objective(f: dict, real: dict) -> float:
+# What --fit searches (configs/sensors/davis346.yaml came from it): ON / OFF thresholds, refractory (us),
+# photoreceptor cutoff (Hz); the thresholds' spread fixed at 0.03
+FIT_GRID = {"pos_threshold": (0.25, 0.3, 0.35, 0.4), "neg_threshold": (0.25, 0.3, 0.35, 0.4), "threshold_sigma": (0.03,),
+            "refractory_us": (500, 1000), "lowpass_cutoff_hz": (0.0, 100.0, 300.0)}
+# --wide: lower thresholds, the spread, shorter refractory periods (216 configs, ~25 min on one core)
+WIDE_GRID = {"pos_threshold": (0.2, 0.25, 0.3), "neg_threshold": (0.2, 0.25, 0.3), "threshold_sigma": (0.03, 0.06),
+             "refractory_us": (250, 500, 750, 1000), "lowpass_cutoff_hz": (0.0, 100.0, 300.0)}
+
+
+def objective(f: dict, real: dict, floor_term: bool = False) -> float:
     """What the fit minimises on the first half: the two distances, the static-pixel rate's and the
-    event count's log10 ratios to the camera's."""
+    event count's log10 ratios to the camera's (and with floor_term the interval floor's, p0.1)."""
     rate = abs(math.log10(max(f["static_rate_hz"], 1e-6) / max(real["static_rate_hz"], 1e-6)))
     count = abs(math.log10(max(f["events"], 1) / max(real["events"], 1)))
-    return f["w1_log_rate"] + f["w1_log_iei"] + 0.25 * rate + count
+    floor = abs(math.log10(max(f["iei_p0_1_us"], 1.0) / max(real["iei_p0_1_us"], 1.0))) if floor_term else 0.0
+    return f["w1_log_rate"] + f["w1_log_iei"] + floor + 0.25 * rate + count
 
 
-def fit(frames, t_us, real, static, log=print):
+def fit(frames, t_us, real, static, log=print, wide: bool = False):
     """The sensor config that minimises `objective` on the first half (grid search), and its leak."""
     from simulator.aps import simulate_frames
     from simulator.config import SimulatorConfig
@@ -118,16 +132,15 @@ def fit(frames, t_us, real, static, log=print):
     leak = len(on_static) / max(static.sum(), 1) / ((mid - int(t_us[0])) / 1e6)
     half = t_us <= mid + (t_us[1] - t_us[0])
     best = None
-    for pos, neg, refr, cut in itertools.product((0.25, 0.3, 0.35, 0.4), (0.25, 0.3, 0.35, 0.4), (500, 1000),
-                                                 (0.0, 100.0, 300.0)):
-        cfg = SimulatorConfig(pos_threshold=pos, neg_threshold=neg, threshold_sigma=0.03, refractory_us=refr,
-                              lowpass_cutoff_hz=cut, leak_rate_hz=leak)
+    grid = WIDE_GRID if wide else FIT_GRID
+    for values in itertools.product(*grid.values()):
+        cfg = SimulatorConfig(**dict(zip(grid, values)), leak_rate_hz=leak)
         sim = window(simulate_frames(frames[half], t_us[half], cfg, RATE_HZ), int(t_us[0]), mid)
         f = figures(sim, first, static)
-        score = objective(f, target)
+        score = objective(f, target, floor_term=wide)
         if best is None or score < best[0]:
             best = (score, cfg, f)
-            log(f"fit: pos {pos} neg {neg} refractory {refr} us cutoff {cut} Hz: {score:.3f} (best)")
+            log("fit: " + " ".join(f"{k} {v}" for k, v in zip(grid, values)) + f": {score:.3f} (best)")
     return best[1], leak, target
 
 
@@ -142,6 +155,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="a DAVIS AEDAT4 recording with APS frames and events (e.g. the aedat 2.3.0 package's "
                         "tests/data/test_data.aedat4, MIT)")
     p.add_argument("--fit", action="store_true", help="search the davis346 preset's values on the first half")
+    p.add_argument("--wide", action="store_true", help="with --fit: the wider grid and the floor in the objective")
     p.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = p.parse_args(argv)
     dn, t_us, real = read_clip(args.clip)
@@ -152,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     configs.update({k: SimulatorConfig(**v) for k, v in V2E.items()})
     out = {"frames": len(dn), "static_pixels": int(static.sum())}
     if args.fit:
-        cfg, leak, target = fit(frames, t_us, real, static)
+        cfg, leak, target = fit(frames, t_us, real, static, wide=args.wide)
         configs["fitted"] = cfg
         out["fitted"] = {k: getattr(cfg, k) for k in ("pos_threshold", "neg_threshold", "refractory_us",
                                                       "lowpass_cutoff_hz", "leak_rate_hz", "threshold_sigma")}

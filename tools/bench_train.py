@@ -9,12 +9,16 @@ deformation on, in two states:
 - early: the method's random initial model (a haze whose footprints cover the image: the slowest
   part of training for the rasterizer);
 - late: that model after intensity-importance pruning (max alpha x transmittance over the training
-  cameras at 5 times < 0.015), what training keeps after its first IIP round.
+  cameras at 5 times < 0.015), what training keeps after its first IIP round;
+- or, with `--model PT`, a trained state (a run's model or snapshot): what a step costs where
+  training actually is.
 Learning rates are 0, so every timed iteration costs what a training one does but the model stays
 the same. Each part is timed inside the real iterations: rasterizer forward and backward (the
 projection included), deformation MLP forward and backward (from the first gradient reaching its
 outputs until its first layer has been differentiated: autograd runs one render's nodes at a time,
-so the intervals do not overlap), and the rest (SH colours, losses, event maps, Adam).
+so the intervals do not overlap), the trajectories' forward (their backward falls under "rest"),
+data (an E-4DGS step's event window, event maps and target counts), the optimiser (Adam's step and
+zeroing the gradients), and the rest (SH colours, the losses and their backward).
 
 `--against REV` times a git revision's tree side by side: each tree runs in its own worker process
 (PYTHONPATH set to that tree) and the driver alternates single iterations between them, so machine
@@ -22,8 +26,8 @@ stalls hit both alike and the speed-up ratio comes from one run. `--precisions` 
 this tree's deformation MLP under several `train.precision` values (one worker each; `auto` shows what
 it resolved to; the precision is the MLP's, so these workers set `train.deform_field.kind: mlp`), so the
 MLP's dtypes are compared on one machine in one run; `--fields trajectory` adds a
-worker whose deformation is per-Gaussian trajectories (its time falls under "rest": the MLP columns
-time the MLP only); `--coarse 2 4` adds trajectory workers whose renders and targets are those of a
+worker whose deformation is per-Gaussian trajectories; `--set KEY=VALUE` overrides every worker of this
+tree's config (e.g. `--set train.deform_field.width=128` for a smaller MLP); `--coarse 2 4` adds trajectory workers whose renders and targets are those of a
 coarse-to-fine stage at 1/2 and 1/4 resolution (train.coarse_to_fine). Medians throughout; the CPU
 (model and its bf16-relevant flags) is printed above the table.
 """
@@ -39,9 +43,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from tools.tool_cli import int_in, nonnegative_int, positive_int, run_tool
+from tools.tool_cli import existing_file, int_in, nonnegative_int, positive_int, run_tool
 
-PARTS = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd")
+PARTS = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd", "trajectory_fwd", "data", "optimiser")
 CONFIGS = {"d3dgs": "configs/recipes/d3dgs/quick.yaml", "e4dgs": "configs/recipes/e4dgs/quick.yaml",
            "e4dgs_rgb": "configs/recipes/e4dgs/quick.yaml"}
 OLD_CONFIGS = {"d3dgs": "configs/recon/bench/d3dgs_quick.yaml", "e4dgs": "configs/recon/bench/e4dgs_quick.yaml",
@@ -82,6 +86,25 @@ def instrument(clock: Clock):
                     clock.add(_part, time.perf_counter() - t0)
                     return out
                 setattr(obj, name, staticmethod(timed))
+
+    import recon.event_supervision as ev
+    from recon.event_windows import WindowSampler
+    from recon.trajectory import TrajectoryField
+
+    def timer(owner, name, part):
+        fn = getattr(owner, name)
+        saved.append((owner, name, owner.__dict__[name]))
+
+        def timed(*a, **k):
+            t0 = time.perf_counter()
+            out = fn(*a, **k)
+            clock.add(part, time.perf_counter() - t0)
+            return out
+        setattr(owner, name, timed)
+    # data: an E-4DGS step's event window, its event maps and target counts (with the ESS noise)
+    for owner, name in ((WindowSampler, "sample"), (WindowSampler, "sample_views"), (ev, "event_maps"), (ev, "gt_counts")):
+        timer(owner, name, "data")
+    timer(TrajectoryField, "deform", "trajectory_fwd")
 
     forward = DeformationField.forward
     saved.append((DeformationField, "forward", forward))
@@ -133,7 +156,8 @@ def _first_layer_node(root, weight):
     return None
 
 
-def build_trainer(scene: str, method: str, n: int, phase: str, out: str, extra: dict | None = None):
+def build_trainer(scene: str, method: str, n: int, phase: str, out: str, extra: dict | None = None,
+                  model_path: str | None = None):
     import torch
 
     import recon
@@ -160,7 +184,22 @@ def build_trainer(scene: str, method: str, n: int, phase: str, out: str, extra: 
     trainer = Trainer(get_method(method)(ds, cfg), out, progress=False)
     trainer.setup()
     model = trainer.model
-    if phase == "late":   # E-4DGS's intensity-importance pruning, whatever the method
+    if model_path:        # a trained state: its Gaussians (and its field where it is this worker's kind and size)
+        from recon.densify import DensifyStats
+
+        loaded = recon.load(model_path)
+        g = loaded.gaussians.to(trainer.device)
+        if model.deform.kind == "trajectory" and g.motion is None:
+            g.enable_motion(model.deform.n_basis)
+        elif model.deform.kind != "trajectory":
+            g.motion = None
+        model.gaussians = g
+        if loaded.deform.spec() == model.deform.spec():
+            model.deform = loaded.deform.to(trainer.device)
+        trainer.method.setup_model(model)
+        trainer.optimizer = trainer.new_optimizer()
+        trainer.stats = DensifyStats(len(model), trainer.device)
+    elif phase == "late":   # E-4DGS's intensity-importance pruning, whatever the method
         events = E4DGSConfig().events
         with torch.no_grad():
             model.gaussians.prune(importance(model, ds, events.iip_times) >= events.iip_threshold)
@@ -179,9 +218,11 @@ def one_iteration(trainer, clock: Clock) -> dict:
     t0 = time.perf_counter()
     loss, _ = trainer.method.step(trainer, trainer.tcfg.iterations)
     loss.backward()
+    t1 = time.perf_counter()
     with torch.no_grad():
         trainer.optimizer.step()
         trainer.optimizer.zero_grad(set_to_none=True)
+    clock.add("optimiser", time.perf_counter() - t1)
     total = time.perf_counter() - t0
     return {"total": total, **clock.parts}
 
@@ -201,7 +242,7 @@ def worker(threads: int) -> None:
         cmd = json.loads(line)
         if "setup" in cmd:
             trainer = build_trainer(cmd["scene"], cmd["setup"], cmd["gaussians"], cmd["phase"],
-                                    tempfile.mkdtemp(dir=tmp.name), cmd.get("overrides"))
+                                    tempfile.mkdtemp(dir=tmp.name), cmd.get("overrides"), cmd.get("model"))
             if cmd.get("factor", 1) != 1:      # a coarse-to-fine stage: every render at 1/factor size
                 trainer.render_factor = cmd["factor"]
             one_iteration(trainer, clock)            # compile / warm caches
@@ -288,12 +329,20 @@ def main(argv=None) -> int:
     ap.add_argument("--iters", type=positive_int, default=12, help="timed iterations per cell and tree")
     ap.add_argument("--threads", type=int_in(1, 1024, "threads"), default=1, help="torch and numba threads of each worker")
     ap.add_argument("--against", default=None, metavar="REV", help="also time this git revision's tree")
-    ap.add_argument("--precisions", nargs="+", default=None, choices=["auto", "float32", "bfloat16"],
+    from recon.config import PRECISIONS
+
+    ap.add_argument("--precisions", nargs="+", default=None, choices=list(PRECISIONS),
                     help="time this tree's deformation MLP once per train.precision value (default: the configs' own field)")
     ap.add_argument("--fields", nargs="+", default=[], choices=["mlp", "trajectory"],
                     help="also time this tree with train.deform_field.kind set to each of these")
     ap.add_argument("--coarse", nargs="+", type=int_in(1, 64, "a coarse factor"), default=[], metavar="FACTOR",
                     help="also time trajectory-field iterations of coarse-to-fine stages rendered at 1/FACTOR size")
+    ap.add_argument("--model", type=existing_file, default=None, metavar="PT",
+                    help="time every worker at this trained state (a run's model.pt or snapshots/iter_*.pt): its "
+                         "Gaussians, and its field where a worker's is of the same kind and size (--phases is "
+                         "then a label)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a config override of every worker of this tree (e.g. train.deform_field.width=128); repeatable")
     ap.add_argument("--worker", type=nonnegative_int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
@@ -306,7 +355,10 @@ def main(argv=None) -> int:
     with contextlib.ExitStack() as stack:
         from common.machine import cpu_summary
 
-        trees = [Tree(label, REPO, args.threads, overrides, factor)
+        from common.config import parse_set
+
+        sets = parse_set(args.set)
+        trees = [Tree(label, REPO, args.threads, {**sets, **overrides}, factor)
                  for label, overrides, factor in worker_specs(args.precisions, args.fields, args.coarse)]
         if args.against:   # the revision at full size and at each coarse factor asked for
             old_root = stack.enter_context(checkout(args.against))
@@ -314,13 +366,15 @@ def main(argv=None) -> int:
                            None, f) for f in revision_factors(args.coarse)]
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
               f"deformation on, median of {args.iters} (ms; it/s); CPU: {cpu_summary()}")
-        print("| method | model | tree | Gaussians | ms/it | it/s | raster fwd | raster bwd | MLP fwd | MLP bwd | rest |")
-        print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+        print("| method | model | tree | Gaussians | ms/it | it/s | raster fwd | raster bwd | MLP fwd | MLP bwd | "
+              "trajectory fwd | data | optimiser | rest |")
+        print("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
         ratios, ratios_p = [], []
         for method in args.methods:
             for phase in args.phases:
                 replies = [t.ask({"setup": method, "phase": phase, "scene": scene, "gaussians": args.gaussians,
-                                  "factor": t.factor, **({"overrides": t.overrides} if t.overrides else {})})
+                                  "factor": t.factor, **({"overrides": t.overrides} if t.overrides else {}),
+                                  **({"model": str(Path(args.model).resolve())} if args.model else {})})
                            for t in trees]
                 for t, r in zip(trees, replies):
                     if not r["recon"].startswith(str(t.root)):

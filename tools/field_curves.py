@@ -5,7 +5,7 @@ moving-pixel PSNR of each snapshot against training seconds.
         --config configs/recipes/e4dgs/quick.yaml [--fields mlp trajectory] [--scale 1] [--set KEY=VALUE]
 
 Each field trains the same config (`train.deform_field.kind` set, `train.iterations` x --scale with
-the schedule scaled along, snapshots at 10 / 25 / 50 / 75 / 100 %) into --out/<method>_<field>; the
+the schedule scaled along, snapshots at 10 / 25 / 50 / 75 / 100 % or at --snapshots) into --out/<method>_<field>; the
 runs resume and are reused like any training folder. Every snapshot is scored as the benchmark
 scores (recon.evaluate: the method's correction, whole images and the scene's dynamic masks).
 Writes <out>/<scene>/<method>_curves.json and prints a Markdown table with the CPU named.
@@ -16,18 +16,21 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from common.argtypes import float_in
 from tools.tool_cli import positive_float, run_tool
 
 SNAPSHOTS = [0.1, 0.25, 0.5, 0.75, 1.0]
 
 
-def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict) -> list[dict]:
+def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict,
+          snapshots: list[float] = SNAPSHOTS) -> list[dict]:
     import recon
     from scene_format.reader import SceneDataset
 
     base = recon.resolve_config(method, config)
     iters = max(1, int(round(base.train.iterations * scale)))
-    overrides = {"train.deform_field.kind": field, "train.snapshots": SNAPSHOTS, "train.iterations": iters, **sets}
+    overrides = {"train.deform_field.kind": field, "train.snapshots": sorted(set(snapshots)), "train.iterations": iters,
+                 **sets}
     if scale != 1:
         # the schedule scales along: a recipe already scaled keeps the budget its numbers are written for
         reference = base.train.schedule_reference if base.train.scale_schedule else base.train.iterations
@@ -57,11 +60,14 @@ def main(argv=None) -> int:
     ap.add_argument("--fields", nargs="+", default=["mlp", "trajectory"], choices=["mlp", "trajectory"])
     ap.add_argument("--scale", type=positive_float, default=1.0, help="budget multiple of the config's iterations")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--snapshots", nargs="+", type=float_in(1e-6, 1.0, "a fraction of the run"), default=SNAPSHOTS,
+                    metavar="F", help="fractions of the run scored (default 0.1 0.25 0.5 0.75 1)")
     ap.add_argument("--out", default="runs/field_curves")
     args = ap.parse_args(argv)
     sets = parse_set(args.set)
     out = Path(args.out) / Path(args.scene).name
-    results = {field: curve(args.scene, args.method, args.config, field, args.scale, out, sets) for field in args.fields}
+    results = {field: curve(args.scene, args.method, args.config, field, args.scale, out, sets, args.snapshots)
+               for field in args.fields}
     (out / f"{args.method}_curves.json").write_text(json.dumps({"cpu": cpu_summary(), "scene": args.scene,
                                                                  "method": args.method, "curves": results}, indent=1))
     print(f"{args.method} on {Path(args.scene).name}, CPU {cpu_summary()}")

@@ -37,7 +37,7 @@ class D3DGSConfig:
     ("w/ blur": the blurred frames, each at the pose of its exposure centre)."""
     frames: str = "sharp"  # sharp, or a blur level's name
     channels: Literal[1, 3] = 3       # 1: train on the grayscale frames
-    lambda_dssim: float = 0.2
+    lambda_dssim: float = 0.2  # D-SSIM's share of the photometric loss (3DGS: 0.2)
     train: TrainConfig = field(default_factory=TrainConfig)  # the training shared by every method
 
 @register

@@ -45,10 +45,10 @@ class DeblurD3DGSConfig:
     lambda_lowres x L1 between the render at the exposure centre and the blurred frame, both
     area-averaged over lowres_factor x lowres_factor blocks (blur moves little at that scale)."""
     frames: str = "medium"  # the blur level trained on
-    blur_samples: int = 5
-    lambda_dssim: float = 0.2
-    lambda_lowres: float = 1.0
-    lowres_factor: int = 4
+    blur_samples: int = 5  # renders averaged over each exposure (odd)
+    lambda_dssim: float = 0.2  # D-SSIM's share of the photometric loss
+    lambda_lowres: float = 1.0  # weight of the low-resolution consistency term
+    lowres_factor: int = 4  # its block size, pixels
     train: TrainConfig = field(default_factory=TrainConfig)
 
     def __post_init__(self):

@@ -46,8 +46,8 @@ class E2VIDD3DGSConfig:
     `weights: ""` is the network this project trained (e2vid/weights/); any official-layout file
     (e.g. E2VID_lightweight.pth.tar) works too. events_per_window 0: one window per frame interval."""
     weights: str = ""  # the E2VID network's weights file ("": the bundled one)
-    events_per_window: int = 0
-    lambda_dssim: float = 0.2
+    events_per_window: int = 0  # events per E2VID window (0: one window per frame interval)
+    lambda_dssim: float = 0.2  # D-SSIM's share of the photometric loss
     color_correct: bool = True       # score after the same log-intensity gain/offset fit as E-4DGS
     train: TrainConfig = field(default_factory=TrainConfig)
 

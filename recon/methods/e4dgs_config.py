@@ -22,29 +22,29 @@ class EventConfig:
     n_events_object: tuple[int, int] = (5_000, 10_000)  # pixels: the paper's range for objects (346x260)
     n_events_room: tuple[int, int] = (100_000, 1_000_000)  # pixels: the paper's range for rooms (346x260)
     noise_sigma: float = 0.02          # log units, on event-free pixels (0: no jitter)
-    max_window_fraction: float = 0.5
+    max_window_fraction: float = 0.5  # a window holds at most this fraction of the smallest event stream
     # cameras supervised per step: the ESS window of one camera, then the same time window on
     # views_per_step - 1 others; the deformation runs once per timestamp for all of them. The paper does
     # not say how many views a step uses; 1 is one camera per step.
     views_per_step: int = 1
     # AES: learnable contrast threshold C_hat = exp(log_c), initialised at c_init; fixed when off
     aes: bool = True
-    c_init: float = 0.15
+    c_init: float = 0.15  # AES: the learnable threshold's initial value
     c_lr: float = 1e-3                 # Adam rate on log C_hat
-    recon_eps: float = 1e-3
+    recon_eps: float = 1e-3  # the event loss's Charbonnier epsilon
     # the event loss averaged over count maps pooled in s x s blocks (recon.event_supervision.multiscale_recon_loss);
     # (1,) is the paper's per-pixel loss
     loss_scales: tuple[int, ...] = (1,)
-    lambda_recon: float = 1.0
+    lambda_recon: float = 1.0  # weight of the event loss
     lambda_tv: float = 0.005           # 0 switches TV off
     # IIP: prune Gaussians whose largest alpha x transmittance over the training cameras at iip_times
     # timestamps is below iip_threshold, every iip_interval iterations from iip_start (reference
     # iterations, scaled like the schedule)
     iip: bool = True
-    iip_threshold: float = 0.015
+    iip_threshold: float = 0.015  # IIP: prune below this max alpha x transmittance
     iip_start: int = 3000              # after the warm-up: on the initial fog (opacity 0.1) most
     iip_interval: int = 1000           # Gaussians score below 0.015 (lego: 10k of 20k at iteration 100)
-    iip_times: int = 5
+    iip_times: int = 5  # IIP: timestamps each Gaussian's importance is taken over
     inherit_deformation: bool = True   # clone / split children read their parent's deformation input
 
     def __post_init__(self):
@@ -83,11 +83,11 @@ class E4DGSConfig:
     step costs; its weight stays lambda_rgb."""
     events: EventConfig = field(default_factory=EventConfig)  # the event supervision (ESS, AES, IIP, TV)
     rgb_frames: str = "medium"  # the blur level whose frames supervise the RGB term
-    lambda_rgb: float = 1.0
-    rgb_every: int = 1
-    lambda_dssim: float = 0.2
+    lambda_rgb: float = 1.0  # weight of the blurred-RGB loss (events + RGB)
+    rgb_every: int = 1  # an RGB term every this many iterations
+    lambda_dssim: float = 0.2  # D-SSIM's share of the RGB loss
     rgb_render: Literal["mean", "centre"] = "mean"  # a blurred frame as the mean of renders over its exposure, or one at its centre
-    rgb_samples: int = 3
+    rgb_samples: int = 3  # renders averaged over each blurred frame's exposure
     train: TrainConfig = field(default_factory=_e4dgs_train)
 
     def __post_init__(self):

@@ -323,3 +323,12 @@ def test_simulate_refuses_a_broken_frame_naming_it(kind, tmp_path, capsys):
     rc, err = run_cli(["simulate", frames, "--fps", "1000", "--out", tmp_path / "ev.h5"], capsys)
     assert rc == 1 and len(err) == 1 and "001.png" in err[0] and "internal error" not in err[0], err
     assert not (tmp_path / "ev.h5").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["frames"]
+
+
+def test_a_seed_list_is_distinct_seeds_in_range():
+    from common.argtypes import seed_list
+
+    assert seed_list("0, 1,2") == (0, 1, 2) and seed_list("7") == (7,)
+    for bad in ("0,,1", "1,1", "-1", "0,1.5", "", "a"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            seed_list(bad)

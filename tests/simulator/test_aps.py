@@ -49,3 +49,17 @@ def test_the_aps_check_refuses_a_recording_it_cannot_decode(tmp_path):
     r = subprocess.run([sys.executable, "-m", "tools.aps_check", "--clip", str(path)], capture_output=True, text=True,
                        cwd=Path(__file__).resolve().parents[2])
     assert r.returncode == 1 and f"{path}: not an AEDAT4 recording" in r.stderr, r.stderr
+
+
+def test_the_fit_objective_is_zero_at_the_camera_and_the_wide_fit_adds_the_floor():
+    import math
+
+    from tools.aps_check import FIT_GRID, WIDE_GRID, objective
+
+    real = {"events": 1000, "static_rate_hz": 0.003, "iei_p0_1_us": 1000.0}
+    same = {**real, "w1_log_rate": 0.0, "w1_log_iei": 0.0}
+    assert objective(same, real) == 0 and objective(same, real, floor_term=True) == 0
+    slow = {**same, "iei_p0_1_us": 2000.0, "events": 10_000}
+    assert objective(slow, real) == 1.0                                  # the count's log10 ratio only
+    assert objective(slow, real, floor_term=True) == 1.0 + math.log10(2)
+    assert set(FIT_GRID) == set(WIDE_GRID) and FIT_GRID["threshold_sigma"] == (0.03,)
