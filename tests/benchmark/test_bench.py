@@ -335,11 +335,46 @@ def test_bench_train_breakdown_times_every_part_inside_an_iteration():
             out = render_at(g, field, cam, 0.4, torch.zeros(1), "cpu", precision)
             (out.image.square().mean() + g.means.sum() * 0).backward()
             total = time.perf_counter() - t0
-            assert all(0 < clock.parts[p] < total for p in PARTS), (precision, clock.parts)
+            seen = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd")     # an MLP render: no trajectory, data or Adam
+            assert all(0 < clock.parts[p] < total for p in seen), (precision, clock.parts)
+            assert all(clock.parts[p] == 0 for p in PARTS if p not in seen), clock.parts
             assert not clock.mlp_started
     finally:
         restore()
     assert DeformationField.forward is original
+
+
+def test_bench_train_times_a_trained_state_with_its_data_and_optimiser(motion_scene, tmp_path):
+    """--model: the worker's trainer holds the saved Gaussians (and the saved field where it is the
+    worker's), and an E-4DGS iteration there times its event data, its trajectories and Adam."""
+    import torch
+
+    import recon
+    from recon.event_windows import WindowSampler
+    from recon.trajectory import TrajectoryField
+    from tools import bench_train as bt
+
+    over = {"train.iterations": 6, "train.warm_up": 2, "train.scale_schedule": False, "train.init.kind": "cube",
+            "train.init.n_points_object": 300, "train.snapshots": [1.0], "train.densify.enabled": False,
+            "train.deform_field.kind": "trajectory"}
+    saved = recon.fit(motion_scene, "e4dgs", overrides=over, out_dir=tmp_path / "run", progress=False).model
+    sample, deform = WindowSampler.sample, TrajectoryField.deform
+    clock = bt.Clock()
+    restore = bt.instrument(clock)
+    try:
+        for kind in ("trajectory", "mlp"):
+            trainer = bt.build_trainer(str(motion_scene), "e4dgs", 300, "late", str(tmp_path / kind),
+                                       {"train.deform_field.kind": kind}, str(tmp_path / "run" / "model.pt"))
+            assert len(trainer.model) == len(saved)
+            assert torch.equal(trainer.model.gaussians.means.detach().cpu(), saved.gaussians.means.detach().cpu())
+            row = bt.one_iteration(trainer, clock)
+            assert row["data"] > 0 and row["optimiser"] > 0 and row["raster_fwd"] > 0
+            assert (row["trajectory_fwd"] > 0) == (kind == "trajectory") and (row["mlp_fwd"] > 0) == (kind == "mlp")
+            if kind == "trajectory":     # the saved trajectories came with it
+                assert torch.equal(trainer.model.gaussians.motion.detach().cpu(), saved.gaussians.motion.detach().cpu())
+    finally:
+        restore()
+    assert WindowSampler.sample is sample and TrajectoryField.deform is deform
 
 
 def test_a_bad_override_is_refused_before_any_job_runs(motion_scene, tmp_path):
