@@ -70,3 +70,28 @@ def test_a_small_field_trains_saves_and_loads_as_itself(motion_scene, tmp_path):
     loaded = recon.load(tmp_path / "run")
     assert (loaded.deform.depth, loaded.deform.width) == (4, 32)
     assert torch.equal(loaded.render(0, 0.7), model.render(0, 0.7))
+
+
+@pytest.mark.parametrize("depth, width", [(8, 256), (4, 128), (3, 8)])
+def test_the_split_skip_product_equals_the_concatenated_reference_forward_and_backward(depth, width):
+    torch.manual_seed(depth)
+    f = DeformationField(depth, width)
+    for head in (f.warp, f.rotation, f.scaling):
+        torch.nn.init.normal_(head.weight, std=0.1)
+    x, t = torch.rand(50, 3, dtype=torch.float64), torch.rand(50, dtype=torch.float64)
+    f = f.double()
+    grads = []
+    for fn in (f.forward, f.forward_ref):
+        f.zero_grad()
+        outs = fn(x, t)
+        sum((o * (k + 1)).sum() for k, o in enumerate(outs)).backward()
+        grads.append((outs, [p.grad.clone() for p in f.parameters()]))
+    (a, ga), (b, gb) = grads
+    for u, v in zip(a, b):
+        torch.testing.assert_close(u, v, rtol=1e-12, atol=1e-12)
+    for u, v in zip(ga, gb):
+        torch.testing.assert_close(u, v, rtol=1e-10, atol=1e-12)
+    with torch.autocast("cpu", dtype=torch.bfloat16):     # bf16: the same up to bf16 rounding
+        fast, ref = f.float()(x.float(), 0.5), f.forward_ref(x.float(), 0.5)
+    for u, v in zip(fast, ref):
+        torch.testing.assert_close(u.float(), v.float(), rtol=0.05, atol=0.02)
