@@ -22,8 +22,14 @@ from tools.tool_cli import positive_float, run_tool
 SNAPSHOTS = [0.1, 0.25, 0.5, 0.75, 1.0]
 
 
+class _Stopped(Exception):
+    pass
+
+
 def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict,
-          snapshots: list[float] = SNAPSHOTS) -> list[dict]:
+          snapshots: list[float] = SNAPSHOTS, max_train_s: float | None = None) -> list[dict]:
+    """The run's curve; with max_train_s the run stops once its training seconds reach it (a model saved
+    there is the last point, marked "stopped"), for a recipe compared at a time budget it overruns."""
     import recon
     from scene_format.reader import SceneDataset
 
@@ -35,18 +41,36 @@ def curve(scene: str, method: str, config: str, field: str, scale: float, out: P
         # the schedule scales along: a recipe already scaled keeps the budget its numbers are written for
         reference = base.train.schedule_reference if base.train.scale_schedule else base.train.iterations
         overrides.update({"train.scale_schedule": True, "train.schedule_reference": reference})
-    result = recon.fit(scene, method, config, out / f"{method}_{field}", overrides=overrides, progress=False,
-                        keep_initial=True)
+    run_dir = out / f"{method}_{field}"
+    stop = {}
+
+    def budget(trainer, it):
+        if max_train_s is not None and trainer.wall_s >= max_train_s and it < trainer.tcfg.iterations:
+            trainer.model.save(run_dir / "stopped.pt")
+            trainer._save_checkpoint()      # resumable, and its snapshots stay (a run with no checkpoint is removed)
+            stop.update(iteration=it, wall_s=trainer.wall_s, n_gaussians=len(trainer.model), log=list(trainer.log),
+                        initial=trainer.initial_model())
+            raise _Stopped
+    try:
+        result = recon.fit(scene, method, config, run_dir, overrides=overrides, progress=False, keep_initial=True,
+                           on_iteration=budget if max_train_s is not None else None)
+        log, initial = result.log, result.initial
+    except _Stopped:
+        log, initial = stop["log"], stop["initial"]
     dataset = SceneDataset(scene)
     points = []
-    for row in result.log:
+    for row in log:
         if "snapshot" in row:
-            s = recon.evaluate(recon.load(result.run_dir / row["snapshot"]), dataset)
+            s = recon.evaluate(recon.load(run_dir / row["snapshot"]), dataset)
             points.append({"iteration": row["iteration"], "wall_s": row["wall_s"], "psnr": s["psnr"],
                            "psnr_dyn": s.get("psnr_dyn"), "n_gaussians": row["n_gaussians"]})
-    floor = recon.evaluate(result.initial, dataset)        # the untrained model the run starts from
+    if stop:
+        s = recon.evaluate(recon.load(run_dir / "stopped.pt"), dataset)
+        points.append({"iteration": stop["iteration"], "wall_s": round(stop["wall_s"], 3), "psnr": s["psnr"],
+                       "psnr_dyn": s.get("psnr_dyn"), "n_gaussians": stop["n_gaussians"], "stopped": True})
+    floor = recon.evaluate(initial, dataset)        # the untrained model the run starts from
     return [{"iteration": 0, "wall_s": 0.0, "psnr": floor["psnr"], "psnr_dyn": floor.get("psnr_dyn"),
-             "n_gaussians": len(result.initial)}] + points
+             "n_gaussians": len(initial)}] + points
 
 
 def main(argv=None) -> int:
@@ -62,12 +86,14 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--snapshots", nargs="+", type=float_in(1e-6, 1.0, "a fraction of the run"), default=SNAPSHOTS,
                     metavar="F", help="fractions of the run scored (default 0.1 0.25 0.5 0.75 1)")
+    ap.add_argument("--max-train-s", type=positive_float, default=None, metavar="S",
+                    help="stop each run once its training seconds reach S (its model there is the last point)")
     ap.add_argument("--out", default="runs/field_curves")
     args = ap.parse_args(argv)
     sets = parse_set(args.set)
     out = Path(args.out) / Path(args.scene).name
-    results = {field: curve(args.scene, args.method, args.config, field, args.scale, out, sets, args.snapshots)
-               for field in args.fields}
+    results = {field: curve(args.scene, args.method, args.config, field, args.scale, out, sets, args.snapshots,
+                            args.max_train_s) for field in args.fields}
     (out / f"{args.method}_curves.json").write_text(json.dumps({"cpu": cpu_summary(), "scene": args.scene,
                                                                  "method": args.method, "curves": results}, indent=1))
     print(f"{args.method} on {Path(args.scene).name}, CPU {cpu_summary()}")
@@ -75,7 +101,8 @@ def main(argv=None) -> int:
     for field, points in results.items():
         for p in points:
             dyn = "–" if p["psnr_dyn"] is None else f"{p['psnr_dyn']:.2f}"
-            print(f"| {field} | {p['iteration']} | {p['wall_s']:.0f} | {p['psnr']:.2f} | {dyn} | {p['n_gaussians']} |")
+            it = f"{p['iteration']} (stopped)" if p.get("stopped") else p["iteration"]
+            print(f"| {field} | {it} | {p['wall_s']:.0f} | {p['psnr']:.2f} | {dyn} | {p['n_gaussians']} |")
     return 0
 
 
