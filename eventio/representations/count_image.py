@@ -20,6 +20,5 @@ def count_image(x: np.ndarray, y: np.ndarray, p: np.ndarray, width: int, height:
     pol = np.asarray(p)
     if not split:
         return np.bincount(flat, weights=pol.astype(np.float64), minlength=width * height).reshape(height, width)
-    on = np.bincount(flat[pol > 0], minlength=width * height).astype(np.float64)
-    off = np.bincount(flat[pol < 0], minlength=width * height).astype(np.float64)
-    return np.stack([on, off]).reshape(2, height, width)
+    both = np.bincount(flat * 2 + (pol < 0), minlength=2 * width * height)     # one pass: [pixel, ON / OFF]
+    return both.reshape(height, width, 2).transpose(2, 0, 1).astype(np.float64)
