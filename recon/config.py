@@ -136,10 +136,6 @@ class DeformFieldConfig:
             raise ConfigError(f"lr_scale: expected a value >= 0, got {self.lr_scale!r}")
         if not (self.smoothness >= 0 and math.isfinite(self.smoothness)):
             raise ConfigError(f"smoothness: expected a finite value >= 0, got {self.smoothness!r}")
-        if not (isinstance(self.depth, int) and 3 <= self.depth <= 16):
-            raise ConfigError(f"depth: expected an integer in [3, 16], got {self.depth!r}")
-        if not (isinstance(self.width, int) and 8 <= self.width <= 1024):
-            raise ConfigError(f"width: expected an integer in [8, 1024], got {self.width!r}")
         if self.smoothness > 0 and self.kind != "trajectory":
             raise ConfigError(f"smoothness: regularises per-Gaussian trajectories; expected kind: trajectory "
                               f"with smoothness {self.smoothness!r}, got kind: {self.kind}")
@@ -285,6 +281,7 @@ DensifyConfig.BOUNDS = {
 DeformFieldConfig.BOUNDS = {
     "degree": (0, 16, "polynomial degree of a trajectory"), "fourier": (0, 64, "sine / cosine pairs per trajectory"),
     "lr_scale": (0.0, 1e3, "a multiple of the means' rate"), "smoothness": (0.0, 1e6, "a loss weight"),
+    "depth": (3, 16, "the MLP's linear layers"), "width": (8, 1024, "the MLP's hidden units"),
 }
 TrainConfig.BOUNDS = {
     "iterations": (1, MAX_ITERATIONS, "200x the paper's 50,000"), "schedule_reference": (1, MAX_ITERATIONS, "iterations"),
