@@ -58,7 +58,6 @@ class SceneJob:
         # [C, T, 4, 4] OpenCV c2w: the rig's, or given (a file's own cameras, read from it by the caller)
         self.plan = make_plan(cfg, out_root, preset, folder, poses=poses)
         self.cfg, self.dir = cfg, self.plan.dir
-        self._kept_index = {id(p): p.kept_index for p in self.plan.plans}
 
     def _log(self, line: str) -> None:
         if self.progress:
@@ -239,7 +238,7 @@ class SceneJob:
         for k, frame in enumerate(frames):
             spools[k].append(sims[k].push(rec709_luma(frame), int(p.t_us[i])))
         t2 = time.perf_counter()
-        kept_index = self._kept_index[id(p)].get(i) if not p.is_variant else None
+        kept_index = p.kept_index.get(i) if not p.is_variant else None
         for k, frame in enumerate(frames):
             if kept_index is not None:
                 scene_folder.write_kept(p.dir, k, kept_index, frame)

@@ -13,6 +13,7 @@ datagen.geometry_cache): blur exposures and windows, dynamic masks, the render s
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,15 +59,10 @@ class ScenePlan:
         """This scene and its speed variants, which share its render loop."""
         return [self] + self.variants
 
-    @property
+    @functools.cached_property
     def kept_index(self) -> dict[int, int]:
         """timestamp -> kept frame number."""
         return {int(i): j for j, i in enumerate(self.kept)}
-
-    @property
-    def test_kept(self) -> np.ndarray:
-        """[K] bool: kept frames that are test views."""
-        return np.arange(len(self.kept)) % self.cfg.frames.test_every == 0
 
     def dynamic_views(self) -> list[tuple[int, int]]:
         """(camera, kept index) of the views with a dynamic mask: the test views, and the contact sheet's."""

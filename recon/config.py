@@ -23,6 +23,15 @@ from typing import Literal
 from common.config import MAX_ITERATIONS, SEED_RANGE, ConfigError, check_positive
 
 PRECISIONS = ("auto", "float32", "bfloat16")      # train.precision's values (recon.precision chooses for auto)
+PAPER_SIZE = (8, 256)    # depth, width of the paper's (D3DGS's) deformation MLP
+
+
+def mlp_spec(depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1]) -> dict:
+    """recon.deform.make_field's spec of an MLP: {"kind": "mlp"} for the paper's size (what runs
+    recorded before the size was a choice), with depth and width otherwise."""
+    if (depth, width) == PAPER_SIZE:
+        return {"kind": "mlp"}
+    return {"kind": "mlp", "depth": depth, "width": width}
 
 REFERENCE_ITERATIONS = 40_000
 MIN_DENSIFY_INTERVAL = 10
@@ -143,8 +152,7 @@ class DeformFieldConfig:
     def spec(self) -> dict:
         """recon.deform.make_field's spec of this field."""
         if self.kind == "mlp":
-            size = {} if (self.depth, self.width) == (8, 256) else {"depth": self.depth, "width": self.width}
-            return {"kind": "mlp", **size}       # as recon.deform.mlp_spec writes it
+            return mlp_spec(self.depth, self.width)
         return {"kind": "trajectory", "degree": self.degree, "fourier": self.fourier}
 
 

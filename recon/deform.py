@@ -13,6 +13,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from recon.config import PAPER_SIZE, mlp_spec  # noqa: F401  (the field's spec, written once)
+
 
 def positional_encoding(x: torch.Tensor, n_freqs: int) -> torch.Tensor:
     """[..., d] -> [..., d (1 + 2 n_freqs)]: x, then sin(2^k x), cos(2^k x) for k = 0 .. n-1."""
@@ -21,17 +23,6 @@ def positional_encoding(x: torch.Tensor, n_freqs: int) -> torch.Tensor:
         f = 2.0 ** k
         parts += [torch.sin(x * f), torch.cos(x * f)]
     return torch.cat(parts, dim=-1)
-
-
-PAPER_SIZE = (8, 256)    # depth, width of the paper's (D3DGS's) field
-
-
-def mlp_spec(depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1]) -> dict:
-    """make_field's spec of an MLP: {"kind": "mlp"} for the paper's size (what runs recorded before
-    the size was a choice), with depth and width otherwise."""
-    if (depth, width) == PAPER_SIZE:
-        return {"kind": "mlp"}
-    return {"kind": "mlp", "depth": depth, "width": width}
 
 
 class DeformationField(nn.Module):
