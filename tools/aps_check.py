@@ -5,8 +5,9 @@ half of the span, reported on the second (held out).
     python -m tools.aps_check --clip davis346.aedat4 [--fit] [--json OUT]
 
 Frames: linear intensity DN / 255 at each exposure's centre, APS noise removed (simulator.aps:
-each pixel's deviation from its temporal median soft-thresholded by 4 DN), upsampled linearly to
-2 kHz. The span is the first to the last frame centre; its halves split at the middle. Per sensor
+each pixel's deviation from its temporal median soft-thresholded by 4 DN), upsampled to 2 kHz
+along the optical flow between frames (`--motion flow`, the default) or linearly (`--motion
+linear`). The span is the first to the last frame centre; its halves split at the middle. Per sensor
 config, on each half: events, ON fraction, consecutive same polarity, the inter-event-interval floor
 (min, p0.1), the noise rate on static pixels (pixels whose denoised APS value never changes: every
 event there is noise), and the realism report's two distances (Wasserstein-1 of log10 per-pixel
@@ -88,15 +89,16 @@ def real_figures(real, static: np.ndarray) -> dict:
             "iei_min_us": r.iei_min_us, "iei_p0_1_us": r.iei_p0_1_us, "static_rate_hz": pixel_rate_hz(real, static)}
 
 
-def run(configs: dict, frames: np.ndarray, t_us: np.ndarray, real, static: np.ndarray) -> dict:
+def run(configs: dict, frames: np.ndarray, t_us: np.ndarray, real, static: np.ndarray, motion: str = "flow") -> dict:
     """{name: {"fit": figures on the first half, "held_out": on the second}} for every sensor config."""
-    from simulator.aps import simulate_frames
+    from simulator.aps import simulate_sequence, upsampled
 
     mid = (int(t_us[0]) + int(t_us[-1])) // 2
     halves = {"fit": (int(t_us[0]), mid), "held_out": (mid, int(t_us[-1]))}
+    sequence = list(upsampled(frames, t_us, RATE_HZ, motion))      # once for every sensor
     out = {}
     for name, cfg in configs.items():
-        sim = simulate_frames(frames, t_us, cfg, RATE_HZ)
+        sim = simulate_sequence(sequence, cfg, frames.shape[2], frames.shape[1])
         out[name] = {h: figures(window(sim, a, b), window(real, a, b), static) for h, (a, b) in halves.items()}
     return out
 
@@ -119,9 +121,9 @@ def objective(f: dict, real: dict, floor_term: bool = False) -> float:
     return f["w1_log_rate"] + f["w1_log_iei"] + floor + 0.25 * rate + count
 
 
-def fit(frames, t_us, real, static, log=print, wide: bool = False):
+def fit(frames, t_us, real, static, log=print, wide: bool = False, motion: str = "flow"):
     """The sensor config that minimises `objective` on the first half (grid search), and its leak."""
-    from simulator.aps import simulate_frames
+    from simulator.aps import simulate_sequence, upsampled
     from simulator.config import SimulatorConfig
 
     mid = (int(t_us[0]) + int(t_us[-1])) // 2
@@ -131,11 +133,12 @@ def fit(frames, t_us, real, static, log=print, wide: bool = False):
     on_static = e[static[e["y"].astype(int), e["x"].astype(int)] & (e["p"] > 0)]
     leak = len(on_static) / max(static.sum(), 1) / ((mid - int(t_us[0])) / 1e6)
     half = t_us <= mid + (t_us[1] - t_us[0])
+    sequence = list(upsampled(frames[half], t_us[half], RATE_HZ, motion))    # the first half's frames only
     best = None
     grid = WIDE_GRID if wide else FIT_GRID
     for values in itertools.product(*grid.values()):
         cfg = SimulatorConfig(**dict(zip(grid, values)), leak_rate_hz=leak)
-        sim = window(simulate_frames(frames[half], t_us[half], cfg, RATE_HZ), int(t_us[0]), mid)
+        sim = window(simulate_sequence(sequence, cfg, frames.shape[2], frames.shape[1]), int(t_us[0]), mid)
         f = figures(sim, first, static)
         score = objective(f, target, floor_term=wide)
         if best is None or score < best[0]:
@@ -147,7 +150,7 @@ def fit(frames, t_us, real, static, log=print, wide: bool = False):
 def main(argv: list[str] | None = None) -> int:
     from simulator.sensor_presets import load_sensor
     from tools.tool_cli import existing_file, write_json
-    from simulator.aps import DN_FULL_SCALE, denoise_aps, static_pixels
+    from simulator.aps import DN_FULL_SCALE, MOTIONS, denoise_aps, static_pixels
     from simulator.config import SimulatorConfig
 
     p = argparse.ArgumentParser(prog="python -m tools.aps_check", description=__doc__.split("\n\n")[0])
@@ -156,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
                         "tests/data/test_data.aedat4, MIT)")
     p.add_argument("--fit", action="store_true", help="search the davis346 preset's values on the first half")
     p.add_argument("--wide", action="store_true", help="with --fit: the wider grid and the floor in the objective")
+    p.add_argument("--motion", choices=MOTIONS, default="flow",
+                   help="how the 25 fps frames are upsampled: along the optical flow between them (flow) or by "
+                        "blending them (linear)")
     p.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = p.parse_args(argv)
     dn, t_us, real = read_clip(args.clip)
@@ -164,9 +170,9 @@ def main(argv: list[str] | None = None) -> int:
     frames = den / DN_FULL_SCALE
     configs = {"ideal": load_sensor("ideal"), "realistic": load_sensor("realistic")}
     configs.update({k: SimulatorConfig(**v) for k, v in V2E.items()})
-    out = {"frames": len(dn), "static_pixels": int(static.sum())}
+    out = {"frames": len(dn), "static_pixels": int(static.sum()), "motion": args.motion}
     if args.fit:
-        cfg, leak, target = fit(frames, t_us, real, static, wide=args.wide)
+        cfg, leak, target = fit(frames, t_us, real, static, wide=args.wide, motion=args.motion)
         configs["fitted"] = cfg
         out["fitted"] = {k: getattr(cfg, k) for k in ("pos_threshold", "neg_threshold", "refractory_us",
                                                       "lowpass_cutoff_hz", "leak_rate_hz", "threshold_sigma")}
@@ -178,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     mid = (int(t_us[0]) + int(t_us[-1])) // 2
     out["real"] = {"fit": real_figures(window(real, int(t_us[0]), mid), static),
                    "held_out": real_figures(window(real, mid, int(t_us[-1])), static)}
-    out["configs"] = run(configs, frames, t_us, real, static)
+    out["configs"] = run(configs, frames, t_us, real, static, args.motion)
     r = out["real"]["held_out"]
     print(f"{len(dn)} APS frames, {int(static.sum())} static pixels; held-out half: the camera made {r['events']} "
           f"events (ON {r['on_fraction']:.3f}, same polarity {r['same_polarity']:.3f}, IEI min "

@@ -17,14 +17,16 @@ min(f, 1/2); its light dependence is not measured (a still clip has one light le
 the per-pixel spread of the noise rate (decades, leak and shot noise alike) from the counts' excess
 variance over Poisson, var = m + m^2 (exp((s ln 10)^2) - 1), which sets the rates' median
 r' = r / exp((s ln 10)^2 / 2) (the configured rates; their mean is r); the refractory period is the p0.1 of the
-same-pixel intervals of every non-hot pixel (moving edges reach it); the readout period, the most
+same-pixel intervals of every non-hot pixel (moving edges reach it), or the still pixels' own p0.1 where that is
+shorter (a refractory period bounds every pixel's intervals, so none it allows can be shorter than it); the readout period, the most
 common step between distinct timestamps when more than half of the timestamps share it (a
 semi-synchronous readout; else none).
 
 Report (second half): a still scene (one grey level, `--intensity`, linear) simulated for the
 half's duration at the clip's resolution by each sensor, against the camera's still pixels:
-the noise rate, its ON fraction, hot-pixel fraction, the interval floor and the Wasserstein-1
-distances of log10 per-pixel rate (pixels with an event) and log10 interval. Thresholds are not
+the noise rate, its ON fraction, hot-pixel fraction, the interval floor, the regularity (the median
+interval of pixels with two events against two events placed at random: 1 for Poisson noise) and the
+Wasserstein-1 distances of log10 per-pixel rate (pixels with an event) and log10 interval. Thresholds are not
 measured here (no frames: a still scene's noise does not depend on them but through shot noise's
 threshold scaling).
 """
@@ -85,7 +87,10 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
     excess = cold_counts.var() - m if len(cold_counts) else 0.0
     spread = math.sqrt(math.log1p(excess / m ** 2)) / math.log(10) if m > 0 and excess > 0 else 0.0
     cold_events = e[~np.isin(pix, hot_pix)]
+    n_of = np.bincount(ps, minlength=mask.size)[ps[1:]]
+    two = np.diff(ts)[same & (n_of == 2)]            # the interval of each pixel with exactly two events
     return {"pixels": int(mask.sum()), "events": int(len(e)), "rate_hz": len(e) / mask.sum() / duration_s,
+            "regularity": two_event_regularity(two, duration_s),
             "cold_rate_hz": len(cold_events) / max(len(cold_counts), 1) / duration_s,
             "cold_on_fraction": float(np.mean(cold_events["p"] > 0)) if len(cold_events) else float("nan"),
             "on_fraction": float(np.mean(e["p"] > 0)) if len(e) else float("nan"),
@@ -94,6 +99,16 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
             "iei_p0_1_us": float(np.percentile(iei_cold, 0.1)) if len(iei_cold) else float("nan"),
             "iei_p1_us": float(np.percentile(iei, 1)) if len(iei) else float("nan"),
             "log_rates": np.log10(rates), "log_iei": np.log10(np.maximum(iei, 1)).astype(float)}
+
+
+def two_event_regularity(intervals_us: np.ndarray, duration_s: float) -> float:
+    """The median interval of the pixels with exactly two events in a window of duration_s, over the
+    median for two events placed at random in it, (1 - 1/sqrt(2)) duration (a Poisson process given
+    its count): 1 for Poisson noise, above 1 for noise more regular than Poisson (a leak), below for
+    bursts; nan with fewer than 20 such pixels."""
+    if len(intervals_us) < 20:
+        return float("nan")
+    return float(np.median(intervals_us) / 1e6 / ((1 - 1 / math.sqrt(2)) * duration_s))
 
 
 def readout_period_us(stream, max_period_us: float = 1000.0) -> int:
@@ -127,6 +142,13 @@ def refractory_floor_us(stream, hot_pixels: np.ndarray) -> int:
     return int(round(float(np.percentile(iei, 0.1)))) if len(iei) else 0
 
 
+def refractory_us(all_pixels_p0_1_us: float, still_pixels_p0_1_us: float) -> int:
+    """The refractory period from the interval floors (p0.1) of every non-hot pixel and of the still
+    ones: the first, unless the still pixels show shorter intervals (the period bounds them all)."""
+    floors = [v for v in (all_pixels_p0_1_us, still_pixels_p0_1_us) if math.isfinite(v) and v > 0]
+    return int(round(min(floors))) if floors else 0
+
+
 def fit(real_half, mask, duration_s: float, clip_stream) -> dict:
     """A preset's noise, refractory and readout values from the first half (module note)."""
     from eventio.realism import HOT_FACTOR, HOT_MIN_EVENTS
@@ -149,7 +171,7 @@ def fit(real_half, mask, duration_s: float, clip_stream) -> dict:
             "shot_noise_sigma_decades": round(f["rate_spread_decades"], 3),
             "leak_rate_sigma_decades": round(f["rate_spread_decades"], 3),
             "hot_pixel_fraction": round(f["hot_fraction"], 6), "hot_pixel_rate_hz": round(f["hot_rate_hz"], 3),
-            "refractory_us": refractory_floor_us(real_half, hot),
+            "refractory_us": refractory_us(refractory_floor_us(real_half, hot), f["iei_p0_1_us"]),
             "readout_period_us": readout_period_us(clip_stream)}
 
 
@@ -211,10 +233,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{args.clip} ({fmt}, {stream.width}x{stream.height}, {len(e):,} events, {(t1 - t0) / 1e6:.2f} s): "
           f"{int(mask.sum()):,} still pixels ({mask.mean():.1%}); fitted on the first half: {fitted}\n")
     held = real["held_out"]
-    print("| sensor (held-out half) | noise (Hz / still pixel) | ON | hot pixels | IEI p0.1 (us) | W1 log rate | W1 log IEI |")
-    print("|---|---|---|---|---|---|---|")
+    print("| sensor (held-out half) | noise (Hz / still pixel) | ON | hot pixels | IEI p0.1 (us) | regularity | "
+          "W1 log rate | W1 log IEI |")
+    print("|---|---|---|---|---|---|---|---|")
     print(f"| the camera | {held['rate_hz']:.4f} | {held['on_fraction']:.3f} | {held['hot_fraction']:.5f} | "
-          f"{held['iei_p0_1_us']:.0f} | 0 | 0 |")
+          f"{held['iei_p0_1_us']:.0f} | {held['regularity']:.2f} | 0 | 0 |")
     out["configs"] = {}
     for name, cfg in configs.items():
         sim = still_scene(cfg, stream.width, stream.height, dur["held_out"], args.intensity)
@@ -222,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
         d = compare(f, held)
         out["configs"][name] = {**{k: v for k, v in f.items() if not k.startswith("log_")}, **d}
         print(f"| {name} | {f['rate_hz']:.4f} | {f['on_fraction']:.3f} | {f['hot_fraction']:.5f} | "
-              f"{f['iei_p0_1_us']:.0f} | {d['w1_log_rate']:.3f} | {d['w1_log_iei']:.3f} |")
+              f"{f['iei_p0_1_us']:.0f} | {f['regularity']:.2f} | {d['w1_log_rate']:.3f} | {d['w1_log_iei']:.3f} |")
     if args.json:
         write_json(args.json, out)
     return 0
