@@ -70,9 +70,9 @@ def in_between(a: np.ndarray, b: np.ndarray, flow_ab: np.ndarray, flow_ba: np.nd
     if not 0.0 <= w <= 1.0:
         raise ValueError(f"in_between: the fraction must lie in [0, 1], got {w!r}")
     if w == 0.0:
-        return np.asarray(a, np.float32)
+        return np.array(a, np.float32)          # a copy: the caller may write into it
     if w == 1.0:
-        return np.asarray(b, np.float32)
+        return np.array(b, np.float32)
     f_wa = -(1 - w) * w * flow_ab + w * w * flow_ba
     f_wb = (1 - w) ** 2 * flow_ab - w * (1 - w) * flow_ba
     return ((1 - w) * warp(a, f_wa) + w * warp(b, f_wb)).astype(np.float32)

@@ -61,7 +61,7 @@ def upsampled(frames: np.ndarray, t_us: np.ndarray, rate_hz: float,
     step = 1e6 / rate_hz
     times = np.unique(np.round(np.arange(t_us[0], t_us[-1] + 1, step)).astype(np.int64))
     flows: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    still = np.all(frames == frames[:1], axis=0)    # never changes: a still point of the scene stays still
+    still = static_pixels(frames)          # never changes: a still point of the scene stays still in between
     for t in times.tolist():
         k = min(int(np.searchsorted(t_us, t, side="right")) - 1, len(t_us) - 2)
         w = (t - t_us[k]) / (t_us[k + 1] - t_us[k])

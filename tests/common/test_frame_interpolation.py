@@ -44,6 +44,7 @@ def test_the_end_points_are_the_frames_themselves():
     a, b = rng.random((6, 7)).astype(np.float32), rng.random((6, 7)).astype(np.float32)
     f = rng.normal(0, 2, (6, 7, 2)).astype(np.float32)
     assert np.array_equal(in_between(a, b, f, -f, 0.0), a) and np.array_equal(in_between(a, b, f, -f, 1.0), b)
+    assert in_between(a, b, f, -f, 0.0) is not a                      # a copy, never the caller's frame
     with pytest.raises(ValueError, match=r"fraction must lie in \[0, 1\], got 1.5"):
         in_between(a, b, f, -f, 1.5)
 
