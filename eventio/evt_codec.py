@@ -274,7 +274,7 @@ def _row_words_ref(xs: list[int], pol: int) -> list[int]:
         while k < len(xs) and xs[k] < base + 12:
             block = [v for v in xs[k:] if v < base + 12]
             if len(set(block)) < len(block):
-                break                                            # a repeat: the next round sends it alone
+                break                                            # a repeat: the next pass of the loop sends it alone
             kind, width = (EVT3_VECT_8, 8) if block[-1] < base + 8 else (EVT3_VECT_12, 12)
             words.append(_w3(kind, sum(1 << (v - base) for v in block)))
             k += len(block)
