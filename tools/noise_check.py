@@ -70,7 +70,8 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
     e = e[inside]
     W = stream.width
     pix = e["y"].astype(np.int64) * W + e["x"].astype(np.int64)
-    counts = np.bincount(pix, minlength=mask.size)[mask.reshape(-1)]
+    per_pixel = np.bincount(pix, minlength=mask.size)
+    counts = per_pixel[mask.reshape(-1)]
     active = counts[counts > 0]
     rates = active / duration_s
     p99 = float(np.percentile(rates, 99)) if len(rates) else 0.0
@@ -87,7 +88,7 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
     excess = cold_counts.var() - m if len(cold_counts) else 0.0
     spread = math.sqrt(math.log1p(excess / m ** 2)) / math.log(10) if m > 0 and excess > 0 else 0.0
     cold_events = e[~np.isin(pix, hot_pix)]
-    n_of = np.bincount(ps, minlength=mask.size)[ps[1:]]
+    n_of = per_pixel[ps[1:]]                          # the events of each interval's pixel
     two = np.diff(ts)[same & (n_of == 2)]            # the interval of each pixel with exactly two events
     return {"pixels": int(mask.sum()), "events": int(len(e)), "rate_hz": len(e) / mask.sum() / duration_s,
             "regularity": two_event_regularity(two, duration_s),
