@@ -68,6 +68,15 @@ class SimulatorConfig:
     readout_period_us: int = 0  # semi-synchronous readout: timestamps rounded up to this step (0: asynchronous)
     max_event_rate_hz: float = 0.0  # bandwidth limit of the readout, events per second (0: unlimited)
     max_readout_delay_us: int = 0  # an event waiting longer than this is dropped (0: never)
+    # Noise with memory (DVS-Voltmeter's drift-diffusion pixel): a random walk with drift added to the
+    # log input, whose threshold crossings are the pixel's own events. An event moves the reference and
+    # the next needs a whole threshold of walk, so the intervals are more regular than Poisson (a renewal
+    # process; coefficient of variation sqrt(2/3) without drift). Set by the event rate it makes on a
+    # still pixel at the nominal thresholds (exact for C+ = C-, with the mean threshold otherwise), its
+    # ON share (the drift) and the per-pixel spread of that rate (log-normal, decades; a fixed pattern).
+    diffusion_noise_rate_hz: float = 0.0
+    diffusion_noise_on_fraction: float = 0.5  # share of ON events on a still pixel (0.5: no drift)
+    diffusion_noise_sigma_decades: float = 0.0  # per-pixel spread of the diffusion-noise rate (log-normal, decades)
 
     def __post_init__(self):
         def need(ok: bool, field: str, what: str):
@@ -87,9 +96,10 @@ class SimulatorConfig:
             need(finite(getattr(self, name)) and getattr(self, name) >= self.threshold_min, name,
                  f"a number >= threshold_min ({self.threshold_min})")
         for name in ("threshold_sigma", "lowpass_cutoff_hz", "leak_rate_hz", "leak_rate_sigma_decades",
-                     "shot_noise_rate_hz", "hot_pixel_rate_hz"):
+                     "shot_noise_rate_hz", "hot_pixel_rate_hz", "diffusion_noise_rate_hz",
+                     "diffusion_noise_sigma_decades"):
             need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
-        for name in ("shot_noise_rate_hz", "hot_pixel_rate_hz", "leak_rate_hz"):
+        for name in ("shot_noise_rate_hz", "hot_pixel_rate_hz", "leak_rate_hz", "diffusion_noise_rate_hz"):
             need(getattr(self, name) <= MAX_RATE_HZ, name, f"at most {MAX_RATE_HZ:g} events per second per pixel "
                  "(the sensor's bandwidth; more would only fill memory)")
         need(isinstance(self.refractory_us, int) and self.refractory_us >= 0, "refractory_us", "a non-negative integer")
@@ -98,6 +108,9 @@ class SimulatorConfig:
                  "a non-negative number, or null (threshold_sigma)")
         need(finite(self.shot_noise_on_fraction) and 0 <= self.shot_noise_on_fraction <= 1, "shot_noise_on_fraction",
              "a number in [0, 1]")
+        # all-ON or all-OFF would need an infinite drift
+        need(finite(self.diffusion_noise_on_fraction) and 0.001 <= self.diffusion_noise_on_fraction <= 0.999,
+             "diffusion_noise_on_fraction", "a number in [0.001, 0.999]")
         for name in ("latency_us", "latency_jitter_us", "max_event_rate_hz", "shot_noise_white_factor",
                      "shot_noise_sigma_decades"):
             need(finite(getattr(self, name)) and getattr(self, name) >= 0, name, "a non-negative number")
@@ -144,13 +157,18 @@ class SimulatorConfig:
         return self.shot_noise_rate_hz > 0
 
     @property
+    def has_diffusion_noise(self) -> bool:
+        return self.diffusion_noise_rate_hz > 0
+
+    @property
     def has_hot_pixels(self) -> bool:
         return self.hot_pixel_fraction > 0 and self.hot_pixel_rate_hz > 0
 
     @property
     def is_noise_free(self) -> bool:
-        """No random events (shot noise, hot pixels); leak, mismatch, low-pass, refractory are deterministic."""
-        return not (self.has_shot_noise or self.has_hot_pixels)
+        """No random events (shot noise, hot pixels, diffusion noise); leak, mismatch, low-pass, refractory
+        are deterministic."""
+        return not (self.has_shot_noise or self.has_hot_pixels or self.has_diffusion_noise)
 
     def sensor_record(self):
         """This sensor as the plain record an event file holds (eventio.sensor.SensorRecord)."""
@@ -177,10 +195,14 @@ SimulatorConfig.BOUNDS = {
     "latency_us": (0.0, 1e6, "microseconds"), "latency_jitter_us": (0.0, 1e6, "microseconds"),
     "readout_period_us": (0, 10 ** 6, "microseconds"), "max_event_rate_hz": (0.0, 1e10, "events per second (the sensor)"),
     "max_readout_delay_us": (0, 10 ** 9, "microseconds"),
+    "diffusion_noise_rate_hz": (0.0, MAX_RATE_HZ, "events per second a pixel"),
+    "diffusion_noise_on_fraction": (0.001, 0.999, "a fraction of the diffusion-noise events"),
+    "diffusion_noise_sigma_decades": (0.0, 10.0, "decades"),
 }
 
 # Fields added after datasets were first written: left out of a scene's fingerprint at these values
 # (off), so folders generated before them keep their identity (datagen.scene_folder.config_fingerprint).
 LATER_FIELDS = {"shot_noise_on_fraction": 0.5, "shot_noise_white_factor": 0.25, "shot_noise_sigma_decades": 0.0,
                 "pos_threshold_sigma": None, "neg_threshold_sigma": None, "latency_us": 0.0, "latency_jitter_us": 0.0,
-                "readout_period_us": 0, "max_event_rate_hz": 0.0, "max_readout_delay_us": 0}
+                "readout_period_us": 0, "max_event_rate_hz": 0.0, "max_readout_delay_us": 0,
+                "diffusion_noise_rate_hz": 0.0, "diffusion_noise_on_fraction": 0.5, "diffusion_noise_sigma_decades": 0.0}

@@ -125,3 +125,38 @@ def shot_noise_rates_hz(inten01: np.ndarray, total_rate_hz: float, c_nominal: fl
     """
     w = np.clip(inten01, 0.0, 1.0)
     return (share * total_rate_hz) * ((white_factor - 1.0) * w + 1.0) * (c_nominal / c_pixel)
+
+
+def diffusion_walk(rate_hz, on_fraction: float, c_pos: float, c_neg: float):
+    """The random walk (sigma in log units per sqrt(s), drift in log units per s; shapes of `rate_hz`)
+    whose threshold crossings make `rate_hz` events per second on a still pixel, `on_fraction` of them ON.
+
+    A walk with drift mu and variance sigma^2 per second, started at the reference, leaves (-C, C)
+    upwards with probability 1 / (1 + exp(-k)), k = 2 mu C / sigma^2, after a mean time
+    (C / mu) tanh(k / 2) (C^2 / sigma^2 without drift); an event moves the reference by C and the walk
+    starts again. So k = logit(on_fraction), sigma^2 = rate C^2 2 tanh(k / 2) / k, mu = k sigma^2 / (2 C).
+    C is the mean of c_pos and c_neg (exact when they are equal).
+    """
+    c = 0.5 * (c_pos + c_neg)
+    k = math.log(on_fraction / (1.0 - on_fraction))
+    shape = 1.0 if abs(k) < 1e-9 else 2.0 * math.tanh(k / 2.0) / k
+    var_per_s = np.asarray(rate_hz, dtype=np.float64) * (c * c * shape)
+    return np.sqrt(var_per_s), var_per_s * (k / (2.0 * c))
+
+
+def diffusion_equilibrium_offsets(rng: np.random.Generator, n: int, on_fraction: float, grid: int = 4001) -> np.ndarray:
+    """Where the diffusion noise's walk stands against the reference at a random moment of a long still
+    recording, in thresholds [n] (in (-1, 1)): a pixel switched on long before the first frame.
+
+    The walk restarts at the reference after each event, so its position is distributed as the time it
+    spends at x before leaving (-1, 1) from 0: the Green's function of the drifted walk, with scale
+    s(x) = (1 - exp(-k x)) / k and speed density exp(k x) (k = logit(on_fraction); units of the
+    threshold): (s(min(x, 0)) - s(-1)) (s(1) - s(max(x, 0))) exp(k x); without drift the triangle
+    1 - |x|. Drawn by inverting its distribution function on `grid` points.
+    """
+    k = math.log(on_fraction / (1.0 - on_fraction))
+    x = np.linspace(-1.0, 1.0, grid)
+    s = (lambda v: v) if abs(k) < 1e-9 else (lambda v: -np.expm1(-k * v) / k)
+    density = (s(np.minimum(x, 0.0)) - s(-1.0)) * (s(1.0) - s(np.maximum(x, 0.0))) * np.exp(k * x)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(x))])
+    return np.interp(rng.random(n), cdf / cdf[-1], x)

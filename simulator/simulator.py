@@ -7,6 +7,7 @@ previous frame as an `EVENT_DTYPE` array. The first frame only initialises the p
 
 Stages, each run only when the config enables it: log response -> photoreceptor low-pass -> leak
 (drift of the reference, applied as a rising offset on the input so the interval stays linear) ->
+diffusion noise (a random walk with drift on the input, stepped at each frame) ->
 shot noise and hot pixels (random events) -> threshold crossings with per-pixel mismatch,
 refractory period and exact per-crossing timestamps (`kernels.emit_events`) -> the readout
 (latency and jitter, semi-synchronous timestamps, bandwidth limit; `readout.Readout`), which may hold
@@ -87,14 +88,22 @@ class EventSimulator:
         self._shot_gain = None          # per-pixel shot-noise rate factor (fixed pattern), drawn last
         if c.has_shot_noise and c.shot_noise_sigma_decades > 0:
             self._shot_gain = 10.0 ** fixed_rng.normal(0.0, c.shot_noise_sigma_decades, P)
+        self._walk_sigma = self._walk_drift = None   # diffusion noise: per-pixel walk (drawn after the shot gain)
+        if c.has_diffusion_noise:
+            decades = fixed_rng.normal(0.0, c.diffusion_noise_sigma_decades, P) if c.diffusion_noise_sigma_decades > 0 else 0.0
+            self._walk_sigma, self._walk_drift = pixel.diffusion_walk(
+                c.diffusion_noise_rate_hz * 10.0 ** decades * np.ones(P), c.diffusion_noise_on_fraction,
+                c.pos_threshold, c.neg_threshold)
+            # the walk's start against the reference: a sensor switched on long before (stationary)
+            self._walk_start = pixel.diffusion_equilibrium_offsets(fixed_rng, P, c.diffusion_noise_on_fraction)
         self.t_prev_us: int | None = None
         self.n_frames = 0
         self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
         self._linlog_scratch: dict[np.dtype, np.ndarray] = {}
-        if c.has_lowpass or c.has_leak:
+        if c.has_lowpass or c.has_leak or c.has_diffusion_noise:
             self._level_bufs = [np.empty(P), np.empty(P)]
             self._scratch = np.empty(P)
-        self._lp = self._leak_offset = None
+        self._lp = self._leak_offset = self._walk = None
         # latency, jitter, semi-synchronous steps, bandwidth: after the pixels (simulator.readout)
         self.readout = Readout(config, readout_rng, backend) if config.has_readout else None
 
@@ -155,7 +164,7 @@ class EventSimulator:
             return empty_events()
         dt_s = (t_us - self.t_prev_us) * 1e-6
         level = log_now
-        if c.has_lowpass or c.has_leak:
+        if c.has_lowpass or c.has_leak or c.has_diffusion_noise:
             level = self._level_bufs[self.n_frames % 2]  # the previous level stays in the other one
             if c.has_lowpass:
                 pixel.lowpass_step(self._lp, log_now, frame, dt_s, c.lowpass_cutoff_hz, out=self._lp,
@@ -167,6 +176,14 @@ class EventSimulator:
                 np.multiply(self._leak_step_per_s, dt_s, out=self._scratch)
                 self._leak_offset += self._scratch
                 level += self._leak_offset
+            if c.has_diffusion_noise:   # the walk's step over dt: drift dt + sigma sqrt(dt) N(0, 1), linear between frames
+                self._noise_rng.standard_normal(out=self._scratch)
+                self._scratch *= self._walk_sigma
+                self._scratch *= dt_s ** 0.5
+                self._walk += self._scratch
+                np.multiply(self._walk_drift, dt_s, out=self._scratch)
+                self._walk += self._scratch
+                level += self._walk
         noise = NO_NOISE
         if not c.is_noise_free:
             noise = draw_noise_events(self._noise_rng, self.t_prev_us, t_us, self.n_pixels, frame,
@@ -190,14 +207,18 @@ class EventSimulator:
         P = self.n_pixels
         self._lp = log_now.astype(np.float64) if c.has_lowpass else None
         self._leak_offset = np.zeros(P) if c.has_leak else None
+        self._walk = np.zeros(P) if c.has_diffusion_noise else None
         self._level = log_now  # input level at the previous frame (after low-pass and leak)
         self._base = log_now.astype(np.float64)
         if c.has_leak:
             self._base -= self._leak_phase * self.c_pos
+        if c.has_diffusion_noise:   # offsets in thresholds of each pixel's own side
+            start = self._walk_start
+            self._base -= np.where(start > 0, start * self.c_pos, start * self.c_neg)
         self._t_ready = np.full(P, _NEVER_US, np.int64)
 
     # -- checkpoints ------------------------------------------------------------------------
-    _STATE_ARRAYS = ("_level", "_base", "_t_ready", "_lp", "_leak_offset")
+    _STATE_ARRAYS = ("_level", "_base", "_t_ready", "_lp", "_leak_offset", "_walk")
 
     def state_dict(self) -> dict:
         """Everything needed to continue this sensor later: a dict of arrays and scalars.

@@ -33,7 +33,8 @@ CONFIGS = {
 }
 # `--set effects`: the DAVIS346-like pixel (configs/sensors/davis346.yaml's fitted values) alone and with
 # each optional effect on (the values its `effects:` section supplies; the DVXplorer's 200 us readout
-# steps; shot noise with an OFF-heavy split, light dependence and per-pixel spread as the IMX636 fit's)
+# steps; shot noise with an OFF-heavy split, light dependence and per-pixel spread as the IMX636 fit's, and
+# diffusion noise alike)
 _PIXEL = dict(pos_threshold=0.25, neg_threshold=0.25, threshold_sigma=0.03, refractory_us=500, leak_rate_hz=0.0029)
 EFFECT_CONFIGS = {
     "pixel only": SimulatorConfig(**_PIXEL),
@@ -43,6 +44,9 @@ EFFECT_CONFIGS = {
     "+ ON / OFF mismatch apart (0.02 / 0.04)": SimulatorConfig(**_PIXEL, pos_threshold_sigma=0.02, neg_threshold_sigma=0.04),
     "+ shot noise (1 Hz, 34 % ON, spread 0.6 dec)": SimulatorConfig(**_PIXEL, shot_noise_rate_hz=1.0, shot_noise_on_fraction=0.34,
                                                                   shot_noise_sigma_decades=0.6),
+    "+ diffusion noise (1 Hz, 34 % ON, spread 0.6 dec)": SimulatorConfig(**_PIXEL, diffusion_noise_rate_hz=1.0,
+                                                                       diffusion_noise_on_fraction=0.34,
+                                                                       diffusion_noise_sigma_decades=0.6),
 }
 SETS = {"default": CONFIGS, "effects": EFFECT_CONFIGS}
 

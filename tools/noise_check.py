@@ -20,7 +20,12 @@ r' = r / exp((s ln 10)^2 / 2) (the configured rates; their mean is r); the refra
 same-pixel intervals of every non-hot pixel (moving edges reach it), or the still pixels' own p0.1 where that is
 shorter (a refractory period bounds every pixel's intervals, so none it allows can be shorter than it); the readout period, the most
 common step between distinct timestamps when more than half of the timestamps share it (a
-semi-synchronous readout; else none).
+semi-synchronous readout; else none). The noise that is not leak is split between shot noise
+(Poisson) and diffusion noise (a random walk on the input whose threshold crossings are events: a
+renewal process, more regular than Poisson) by the one figure that tells them apart, the regularity:
+a still scene of the first half's duration is simulated with 0, 1/4, ... 1 of it as diffusion noise,
+and the share whose regularity is the camera's is interpolated between them (0 when the camera is
+no more regular than Poisson: bursts are not modelled).
 
 Report (second half): a still scene (one grey level, `--intensity`, linear) simulated for the
 half's duration at the clip's resolution by each sensor, against the camera's still pixels:
@@ -176,6 +181,42 @@ def fit(real_half, mask, duration_s: float, clip_stream) -> dict:
             "readout_period_us": readout_period_us(clip_stream)}
 
 
+DIFFUSION_SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def with_diffusion_share(fitted: dict, share: float) -> dict:
+    """`fitted`'s values with `share` of its shot noise made diffusion noise instead (same ON share and
+    per-pixel spread)."""
+    total = fitted["shot_noise_rate_hz"] + fitted.get("diffusion_noise_rate_hz", 0.0)
+    on = min(max(fitted["shot_noise_on_fraction"], 0.001), 0.999)
+    return {**fitted, "shot_noise_rate_hz": round((1 - share) * total, 6),
+            "diffusion_noise_rate_hz": round(share * total, 6), "diffusion_noise_on_fraction": round(on, 3),
+            "diffusion_noise_sigma_decades": fitted["shot_noise_sigma_decades"]}
+
+
+def fit_diffusion_share(fitted: dict, target_regularity: float, width: int, height: int, duration_s: float,
+                        intensity: float, seed: int = 0) -> tuple[float, dict]:
+    """The diffusion noise's share of the non-leak noise whose still scene has `target_regularity`
+    (module note), and the regularity simulated at each of DIFFUSION_SHARES."""
+    from dataclasses import replace
+
+    from simulator.config import SimulatorConfig
+
+    table = {}
+    for share in DIFFUSION_SHARES:
+        cfg = replace(SimulatorConfig(), **with_diffusion_share(fitted, share))
+        sim = still_scene(cfg, width, height, duration_s, intensity, seed)
+        table[share] = noise_figures(sim, np.ones((height, width), bool), duration_s)["regularity"]
+    regs = np.array([table[s] for s in DIFFUSION_SHARES])
+    if not (math.isfinite(target_regularity) and np.all(np.isfinite(regs))) or target_regularity <= regs[0]:
+        return 0.0, table
+    if target_regularity >= regs.max():
+        return float(DIFFUSION_SHARES[int(np.argmax(regs))]), table
+    k = int(np.flatnonzero(regs >= target_regularity)[0])          # the first share at or above the target
+    lo, hi = DIFFUSION_SHARES[k - 1], DIFFUSION_SHARES[k]
+    return round(lo + (hi - lo) * (target_regularity - regs[k - 1]) / (regs[k] - regs[k - 1]), 3), table
+
+
 def still_scene(config, width: int, height: int, duration_s: float, intensity: float, seed: int = 0):
     """The events `config`'s sensor makes of a still scene at one linear grey level."""
     from eventio.events import EventStream
@@ -224,6 +265,13 @@ def main(argv: list[str] | None = None) -> int:
            "still_pixels": int(mask.sum()), "real": {h: {k: v for k, v in f.items() if not k.startswith("log_")}
                                                     for h, f in real.items()}}
     fitted = fit(halves["fit"], mask, dur["fit"], stream)
+    if args.fit:
+        share, table = fit_diffusion_share(fitted, real["fit"]["regularity"], stream.width, stream.height,
+                                           dur["fit"], args.intensity)
+        fitted = with_diffusion_share(fitted, share)
+        out["diffusion_share_regularity"] = {str(k): v for k, v in table.items()}
+        print(f"diffusion noise's share: {share} (the camera's regularity {real['fit']['regularity']:.2f} on the "
+              f"first half; simulated at each share: {', '.join(f'{k}: {v:.2f}' for k, v in table.items())})")
     out["fitted"] = fitted
     configs = {"ideal": load_sensor("ideal"), "realistic": load_sensor("realistic")}
     configs.update({k: SimulatorConfig(**v) for k, v in V2E.items()})

@@ -157,3 +157,85 @@ def test_shot_noise_share_light_and_spread():
     sigma = np.sqrt(np.log1p((counts.var() - m) / m ** 2)) / np.log(10)
     assert sigma == pytest.approx(0.5, abs=0.05)
     assert m / (2 * reference / 10_000) == pytest.approx(np.exp((0.5 * np.log(10)) ** 2 / 2), rel=0.08)  # log-normal mean
+
+
+@pytest.mark.parametrize("on_fraction", [0.5, 0.2, 0.9])
+def test_diffusion_walk_solves_the_exit_problem(on_fraction):
+    """sigma and drift give back the rate and ON share through the closed forms of a drifted walk's exit
+    from (-C, C): P(up) = 1 / (1 + exp(-2 mu C / sigma^2)), E[T] = (C / mu) tanh(mu C / sigma^2)."""
+    from simulator.pixel import diffusion_walk
+
+    c, rate = 0.25, np.array([0.01, 2.0])
+    sigma, mu = diffusion_walk(rate, on_fraction, c, c)
+    k = 2 * mu * c / sigma ** 2
+    np.testing.assert_allclose(1 / (1 + np.exp(-k)), on_fraction, rtol=1e-12)
+    mean_exit = c ** 2 / sigma ** 2 if on_fraction == 0.5 else (c / mu) * np.tanh(mu * c / sigma ** 2)
+    np.testing.assert_allclose(1 / mean_exit, rate, rtol=1e-12)
+    if on_fraction == 0.5:
+        np.testing.assert_array_equal(mu, 0.0)
+
+
+SIEGMUND = 0.5826   # a Gaussian walk's mean overshoot of a barrier, in steps' sigma (Siegmund 1979)
+
+
+def _walk_run(rate, c, dt_s, side, on_fraction, seconds, seed=1):
+    cfg = SimulatorConfig(pos_threshold=c, neg_threshold=c, diffusion_noise_rate_hz=rate,
+                          diffusion_noise_on_fraction=on_fraction)
+    n = int(round(seconds / dt_s))
+    frame = np.full((side, side), 0.5, np.float32)
+    ev = simulate([frame] * (n + 1), [round(k * dt_s * 1e6) for k in range(n + 1)], cfg, seed=seed).events
+    pix = ev["y"].astype(np.int64) * side + ev["x"]
+    order = np.lexsort((ev["t"], pix))
+    return pix[order], ev["t"][order] * 1e-6, ev["p"][order]
+
+
+@pytest.mark.parametrize("on_fraction", [0.5, 0.25])
+def test_diffusion_noise_intervals_are_the_walks_exit_times(on_fraction):
+    """On a still scene the time from a pixel's first event to its second is the walk's exit from
+    (-C, C), started at the reference: mean 1 / rate (the frame-sampled walk's barriers sit 0.58 steps
+    further out), ON as often as set, and, without drift, more regular than Poisson: coefficient of
+    variation sqrt(2/3) (Poisson: 1)."""
+    from simulator.pixel import diffusion_walk
+
+    rate, c, dt_s, side = 1.0, 0.2, 0.0016, 100
+    pix, t_s, p = _walk_run(rate, c, dt_s, side, on_fraction, seconds=12.0)
+    rank = np.arange(len(pix)) - np.searchsorted(pix, pix)           # each event's place in its pixel
+    second = np.flatnonzero(rank == 1)
+    assert len(second) >= 0.999 * side * side
+    gaps = t_s[second] - t_s[second - 1]
+    assert np.mean(p[second] > 0) == pytest.approx(on_fraction, abs=0.02)
+    if on_fraction == 0.5:
+        sigma = float(diffusion_walk(rate, 0.5, c, c)[0])
+        expected = (c + SIEGMUND * sigma * dt_s ** 0.5) ** 2 / sigma ** 2
+        assert gaps.mean() == pytest.approx(expected, rel=0.035)
+        assert gaps.std() / gaps.mean() == pytest.approx(np.sqrt(2 / 3), abs=0.035)
+
+
+@pytest.mark.parametrize("on_fraction", [0.5, 0.25])
+def test_diffusion_noise_starts_stationary(on_fraction):
+    """A sensor switched on long before the first frame: events come at the stationary rate from the
+    start (a walk started at the reference would make almost none in the first tenth of an interval:
+    it needs a whole threshold of walk), and a pixel's first event comes after the forward recurrence
+    time, mean E[T^2] / (2 E[T]) = (1 + CV^2) / 2 intervals without drift."""
+    from simulator.pixel import diffusion_walk
+
+    rate, c, dt_s, side = 1.0, 0.2, 0.0016, 100
+    sigma = float(diffusion_walk(rate, 0.5, c, c)[0])
+    sampled = c ** 2 / (c + SIEGMUND * sigma * dt_s ** 0.5) ** 2          # the frame-sampled walk's rate, / rate
+    pix, t_s, p = _walk_run(rate, c, dt_s, side, on_fraction, seconds=8.0 if on_fraction == 0.5 else 0.1)
+    early = np.sum(t_s <= 0.1)
+    expected = 0.1 * rate * sampled * side * side
+    assert abs(early - expected) < 5 * np.sqrt(expected)
+    if on_fraction == 0.5:
+        first = np.ones(len(pix), bool)
+        first[1:] = pix[1:] != pix[:-1]
+        assert t_s[first].mean() == pytest.approx((1 + 2 / 3) / 2 / (rate * sampled), rel=0.04)
+
+
+def test_diffusion_noise_spread_is_log_normal_over_pixels():
+    """The per-pixel rate's spread: sigma^2 of each pixel's walk is proportional to its rate."""
+    cfg = SimulatorConfig(diffusion_noise_rate_hz=0.5, diffusion_noise_sigma_decades=0.4)
+    sim = EventSimulator(cfg, 100, 100, seed=2)
+    decades = np.log10(sim._walk_sigma ** 2)
+    assert decades.std() == pytest.approx(0.4, abs=0.01)
+    assert np.median(decades) == pytest.approx(np.log10(0.5 * 0.2 ** 2), abs=0.01)

@@ -22,6 +22,8 @@ NOISY = {
     "hot": dict(hot_pixel_fraction=0.05, hot_pixel_rate_hz=3000.0),
     "noise+refractory": dict(shot_noise_rate_hz=500.0, hot_pixel_fraction=0.05, hot_pixel_rate_hz=2000.0,
                              refractory_us=120, threshold_sigma=0.03, leak_rate_hz=30.0),
+    "diffusion": dict(diffusion_noise_rate_hz=300.0, diffusion_noise_on_fraction=0.3,
+                      diffusion_noise_sigma_decades=0.3, refractory_us=60, leak_rate_hz=20.0),
 }
 
 

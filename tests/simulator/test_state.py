@@ -8,7 +8,8 @@ from common.checkpoint import JobCheckpoint
 from simulator.resumable import EventSpool
 
 NOISY = SimulatorConfig(threshold_sigma=0.04, lowpass_cutoff_hz=400.0, refractory_us=60, leak_rate_hz=40.0,
-                        shot_noise_rate_hz=800.0, hot_pixel_fraction=0.05, hot_pixel_rate_hz=900.0)
+                        shot_noise_rate_hz=800.0, hot_pixel_fraction=0.05, hot_pixel_rate_hz=900.0,
+                        diffusion_noise_rate_hz=300.0, diffusion_noise_on_fraction=0.4)
 
 
 @pytest.mark.parametrize("config", [SimulatorConfig(), NOISY])

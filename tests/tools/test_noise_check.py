@@ -47,3 +47,26 @@ def test_regularity_is_one_for_poisson_noise_and_above_for_a_leak():
     periodic = np.full(100, 0.6 * T * 1e6)             # a leak of period 0.6 T: two events 0.6 T apart
     assert two_event_regularity(periodic, T) == pytest.approx(0.6 / (1 - 2 ** -0.5))
     assert np.isnan(two_event_regularity(periodic[:5], T))
+
+
+def test_the_noise_split_keeps_the_total_and_recovers_a_known_share():
+    """with_diffusion_share moves noise between shot and diffusion noise without changing the total, and
+    fit_diffusion_share finds back the share of a still scene made with a known one from its regularity;
+    noise no more regular than Poisson gets none."""
+    from dataclasses import replace
+
+    from simulator.config import SimulatorConfig
+    from tools.noise_check import fit_diffusion_share, noise_figures, still_scene, with_diffusion_share
+
+    fitted = {"shot_noise_rate_hz": 0.3, "shot_noise_on_fraction": 0.4, "shot_noise_sigma_decades": 0.2}
+    for share in (0.0, 0.3, 1.0):
+        split = with_diffusion_share(fitted, share)
+        assert split["shot_noise_rate_hz"] + split["diffusion_noise_rate_hz"] == pytest.approx(0.3)
+        assert split["diffusion_noise_on_fraction"] == 0.4 and split["diffusion_noise_sigma_decades"] == 0.2
+    side, seconds = 240, 5.0
+    made = still_scene(replace(SimulatorConfig(), **with_diffusion_share(fitted, 0.6)), side, side, seconds, 0.5, seed=5)
+    target = noise_figures(made, np.ones((side, side), bool), seconds)["regularity"]
+    share, table = fit_diffusion_share(fitted, target, side, side, seconds, 0.5)
+    assert table[1.0] > table[0.0] + 0.2                  # the walk is more regular than shot noise
+    assert share == pytest.approx(0.6, abs=0.2)
+    assert fit_diffusion_share(fitted, 0.9, side, side, seconds, 0.5)[0] == 0.0
