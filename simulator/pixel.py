@@ -138,25 +138,41 @@ def diffusion_walk(rate_hz, on_fraction: float, c_pos: float, c_neg: float):
     C is the mean of c_pos and c_neg (exact when they are equal).
     """
     c = 0.5 * (c_pos + c_neg)
-    k = math.log(on_fraction / (1.0 - on_fraction))
+    k = drift_number(on_fraction)
     shape = 1.0 if abs(k) < 1e-9 else 2.0 * math.tanh(k / 2.0) / k
     var_per_s = np.asarray(rate_hz, dtype=np.float64) * (c * c * shape)
     return np.sqrt(var_per_s), var_per_s * (k / (2.0 * c))
 
 
-def diffusion_equilibrium_offsets(rng: np.random.Generator, n: int, on_fraction: float, grid: int = 4001) -> np.ndarray:
-    """Where the diffusion noise's walk stands against the reference at a random moment of a long still
-    recording, in thresholds [n] (in (-1, 1)): a pixel switched on long before the first frame.
+def drift_number(on_fraction: float) -> float:
+    """k = 2 mu C / sigma^2 of a walk that leaves (-C, C) upwards with probability on_fraction:
+    logit(on_fraction)."""
+    return math.log(on_fraction / (1.0 - on_fraction))
+
+
+def diffusion_equilibrium_offsets(rng: np.random.Generator, k: np.ndarray, grid: int = 2001) -> np.ndarray:
+    """Where a drifted walk stands against its reference at a random moment of a long still recording,
+    in thresholds, per pixel [P] (in (-1, 1)), for each pixel's drift number k [P] (2 mu C / sigma^2).
 
     The walk restarts at the reference after each event, so its position is distributed as the time it
     spends at x before leaving (-1, 1) from 0: the Green's function of the drifted walk, with scale
-    s(x) = (1 - exp(-k x)) / k and speed density exp(k x) (k = logit(on_fraction); units of the
-    threshold): (s(min(x, 0)) - s(-1)) (s(1) - s(max(x, 0))) exp(k x); without drift the triangle
-    1 - |x|. Drawn by inverting its distribution function on `grid` points.
+    s(x) = (1 - exp(-k x)) / k and speed density exp(k x): (s(min(x, 0)) - s(-1)) (s(1) - s(max(x,
+    0))) exp(k x); without drift the triangle 1 - |x|, with a strong upward drift uniform on (0, 1)
+    (a leak's phase). Drawn by inverting its distribution function on `grid` points, for k rounded to
+    0.05 and clipped to +-50 (beyond, the shape no longer changes to the grid's resolution).
     """
-    k = math.log(on_fraction / (1.0 - on_fraction))
+    k = np.clip(np.round(np.asarray(k, np.float64) / 0.05) * 0.05, -50.0, 50.0)
     x = np.linspace(-1.0, 1.0, grid)
-    s = (lambda v: v) if abs(k) < 1e-9 else (lambda v: -np.expm1(-k * v) / k)
-    density = (s(np.minimum(x, 0.0)) - s(-1.0)) * (s(1.0) - s(np.maximum(x, 0.0))) * np.exp(k * x)
-    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(x))])
-    return np.interp(rng.random(n), cdf / cdf[-1], x)
+    u = rng.random(k.shape)
+    out = np.empty(k.shape)
+    below = x < 0
+    for kv in np.unique(k):
+        if abs(kv) < 1e-9:
+            density = 1.0 - np.abs(x)
+        else:   # the products written with expm1: no cancellation near the barriers (times k^2, same shape)
+            density = np.where(below, np.expm1(kv * (1.0 + x)) * -np.expm1(-kv),
+                               np.expm1(kv) * -np.expm1(-kv * (1.0 - x)))
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(x))])
+        sel = k == kv
+        out[sel] = np.interp(u[sel], cdf / cdf[-1], x)
+    return out

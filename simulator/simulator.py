@@ -94,8 +94,13 @@ class EventSimulator:
             self._walk_sigma, self._walk_drift = pixel.diffusion_walk(
                 c.diffusion_noise_rate_hz * 10.0 ** decades * np.ones(P), c.diffusion_noise_on_fraction,
                 c.pos_threshold, c.neg_threshold)
-            # the walk's start against the reference: a sensor switched on long before (stationary)
-            self._walk_start = pixel.diffusion_equilibrium_offsets(fixed_rng, P, c.diffusion_noise_on_fraction)
+            # the walk's start against the reference: a sensor switched on long before (stationary); a leak
+            # beside it is more upward drift (its own start, the leak's phase, is then this one's limit)
+            k = np.full(P, pixel.drift_number(c.diffusion_noise_on_fraction))
+            if c.has_leak:
+                c_mean = 0.5 * (c.pos_threshold + c.neg_threshold)
+                k += 2.0 * self._leak_step_per_s * c_mean / self._walk_sigma ** 2
+            self._walk_start = pixel.diffusion_equilibrium_offsets(fixed_rng, k)
         self.t_prev_us: int | None = None
         self.n_frames = 0
         self._log_bufs: dict[np.dtype, list[np.ndarray]] = {}
@@ -210,11 +215,11 @@ class EventSimulator:
         self._walk = np.zeros(P) if c.has_diffusion_noise else None
         self._level = log_now  # input level at the previous frame (after low-pass and leak)
         self._base = log_now.astype(np.float64)
-        if c.has_leak:
-            self._base -= self._leak_phase * self.c_pos
-        if c.has_diffusion_noise:   # offsets in thresholds of each pixel's own side
+        if c.has_diffusion_noise:   # offsets in thresholds of each pixel's own side (the leak's included)
             start = self._walk_start
             self._base -= np.where(start > 0, start * self.c_pos, start * self.c_neg)
+        elif c.has_leak:
+            self._base -= self._leak_phase * self.c_pos
         self._t_ready = np.full(P, _NEVER_US, np.int64)
 
     # -- checkpoints ------------------------------------------------------------------------

@@ -239,3 +239,27 @@ def test_diffusion_noise_spread_is_log_normal_over_pixels():
     decades = np.log10(sim._walk_sigma ** 2)
     assert decades.std() == pytest.approx(0.4, abs=0.01)
     assert np.median(decades) == pytest.approx(np.log10(0.5 * 0.2 ** 2), abs=0.01)
+
+
+def test_diffusion_noise_beside_a_leak_starts_without_a_burst():
+    """Both start offsets (the leak's phase, the walk's stationary offset) together stay inside the
+    thresholds: the first frame interval has no more events than any later one of the same length."""
+    cfg = SimulatorConfig(leak_rate_hz=2.0, leak_rate_sigma_decades=0.0, diffusion_noise_rate_hz=2.0)
+    frame = np.full((60, 60), 0.5, np.float32)
+    ev = simulate([frame] * 41, [k * 5000 for k in range(41)], cfg, seed=3).events
+    per_interval = np.bincount((ev["t"] - 1) // 5000, minlength=40)
+    assert per_interval[0] <= per_interval[1:].max()
+    assert per_interval.sum() > 200
+
+
+def test_walk_start_is_the_triangle_without_drift_and_a_leak_phase_with_a_strong_one():
+    from simulator.pixel import diffusion_equilibrium_offsets
+
+    rng = np.random.default_rng(0)
+    still = diffusion_equilibrium_offsets(rng, np.zeros(200_000))
+    assert np.abs(still).mean() == pytest.approx(1 / 3, abs=0.005)        # density 1 - |x| on (-1, 1)
+    assert abs(still.mean()) < 0.005
+    leak = diffusion_equilibrium_offsets(rng, np.full(200_000, 60.0))
+    assert np.mean(leak < 0) < 0.03 and leak.mean() == pytest.approx(0.5, abs=0.02)   # ~uniform on (0, 1)
+    mixed = diffusion_equilibrium_offsets(rng, np.array([0.0, 60.0] * 50_000))
+    assert mixed[1::2].mean() == pytest.approx(0.5, abs=0.02) and abs(mixed[::2].mean()) < 0.01
