@@ -29,7 +29,8 @@ no more regular than Poisson: bursts are not modelled).
 
 Report (second half): a still scene (one grey level, `--intensity`, linear) simulated for the
 half's duration at the clip's resolution by each sensor, against the camera's still pixels:
-the noise rate, its ON fraction, hot-pixel fraction, the interval floor, the regularity (the median
+the noise rate, its ON fraction, hot-pixel fraction, the interval floor, consecutive same polarity
+(of each non-hot still pixel's consecutive events), the regularity (the median
 interval of pixels with two events against two events placed at random: 1 for Poisson noise) and the
 Wasserstein-1 distances of log10 per-pixel rate (pixels with an event) and log10 interval. Thresholds are not
 measured here (no frames: a still scene's noise does not depend on them but through shot noise's
@@ -95,8 +96,11 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
     cold_events = e[~np.isin(pix, hot_pix)]
     n_of = per_pixel[ps[1:]]                          # the events of each interval's pixel
     two = np.diff(ts)[same & (n_of == 2)]            # the interval of each pixel with exactly two events
+    pol = e["p"][order]
+    kept = same & ~np.isin(ps[1:], hot_pix)
+    same_pol = float(np.mean(pol[1:][kept] == pol[:-1][kept])) if kept.any() else float("nan")
     return {"pixels": int(mask.sum()), "events": int(len(e)), "rate_hz": len(e) / mask.sum() / duration_s,
-            "regularity": two_event_regularity(two, duration_s),
+            "regularity": two_event_regularity(two, duration_s), "same_polarity": same_pol,
             "cold_rate_hz": len(cold_events) / max(len(cold_counts), 1) / duration_s,
             "cold_on_fraction": float(np.mean(cold_events["p"] > 0)) if len(cold_events) else float("nan"),
             "on_fraction": float(np.mean(e["p"] > 0)) if len(e) else float("nan"),
@@ -283,10 +287,10 @@ def main(argv: list[str] | None = None) -> int:
           f"{int(mask.sum()):,} still pixels ({mask.mean():.1%}); fitted on the first half: {fitted}\n")
     held = real["held_out"]
     print("| sensor (held-out half) | noise (Hz / still pixel) | ON | hot pixels | IEI p0.1 (us) | regularity | "
-          "W1 log rate | W1 log IEI |")
-    print("|---|---|---|---|---|---|---|---|")
+          "same polarity | W1 log rate | W1 log IEI |")
+    print("|---|---|---|---|---|---|---|---|---|")
     print(f"| the camera | {held['rate_hz']:.4f} | {held['on_fraction']:.3f} | {held['hot_fraction']:.5f} | "
-          f"{held['iei_p0_1_us']:.0f} | {held['regularity']:.2f} | 0 | 0 |")
+          f"{held['iei_p0_1_us']:.0f} | {held['regularity']:.2f} | {held['same_polarity']:.3f} | 0 | 0 |")
     out["configs"] = {}
     for name, cfg in configs.items():
         sim = still_scene(cfg, stream.width, stream.height, dur["held_out"], args.intensity)
@@ -294,7 +298,8 @@ def main(argv: list[str] | None = None) -> int:
         d = compare(f, held)
         out["configs"][name] = {**{k: v for k, v in f.items() if not k.startswith("log_")}, **d}
         print(f"| {name} | {f['rate_hz']:.4f} | {f['on_fraction']:.3f} | {f['hot_fraction']:.5f} | "
-              f"{f['iei_p0_1_us']:.0f} | {f['regularity']:.2f} | {d['w1_log_rate']:.3f} | {d['w1_log_iei']:.3f} |")
+              f"{f['iei_p0_1_us']:.0f} | {f['regularity']:.2f} | {f['same_polarity']:.3f} | {d['w1_log_rate']:.3f} | "
+              f"{d['w1_log_iei']:.3f} |")
     if args.json:
         write_json(args.json, out)
     return 0

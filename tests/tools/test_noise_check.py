@@ -70,3 +70,17 @@ def test_the_noise_split_keeps_the_total_and_recovers_a_known_share():
     assert table[1.0] > table[0.0] + 0.2                  # the walk is more regular than shot noise
     assert share == pytest.approx(0.6, abs=0.2)
     assert fit_diffusion_share(fitted, 0.9, side, side, seconds, 0.5)[0] == 0.0
+
+
+def test_same_polarity_counts_each_still_pixels_consecutive_events():
+    """Pixel 3 fires ON, ON, OFF and pixel 9 OFF, ON: of three consecutive pairs one keeps its polarity."""
+    from tools.noise_check import noise_figures
+
+    t = [1000, 500_000, 900_000, 2000, 700_000]
+    x, y, p = [3, 3, 3, 1, 1], [0, 0, 0, 1, 1], [1, 1, -1, -1, 1]
+    order = np.argsort(t, kind="stable")
+    take = lambda v: np.asarray(v)[order]  # noqa: E731
+    s = eventio.EventStream(eventio.make_events(take(t), take(x), take(y), take(p)), 8, 8)
+    f = noise_figures(s, np.ones((8, 8), bool), 1.0)
+    assert f["same_polarity"] == pytest.approx(1 / 3)
+    assert f["on_fraction"] == pytest.approx(3 / 5)
