@@ -97,7 +97,7 @@ def noise_figures(stream, mask: np.ndarray, duration_s: float) -> dict:
     n_of = per_pixel[ps[1:]]                          # the events of each interval's pixel
     two = np.diff(ts)[same & (n_of == 2)]            # the interval of each pixel with exactly two events
     pol = e["p"][order]
-    kept = same & ~np.isin(ps[1:], hot_pix)
+    kept = same & not_hot
     same_pol = float(np.mean(pol[1:][kept] == pol[:-1][kept])) if kept.any() else float("nan")
     return {"pixels": int(mask.sum()), "events": int(len(e)), "rate_hz": len(e) / mask.sum() / duration_s,
             "regularity": two_event_regularity(two, duration_s), "same_polarity": same_pol,
@@ -191,8 +191,11 @@ DIFFUSION_SHARES = (0.0, 0.25, 0.5, 0.75, 1.0)
 def with_diffusion_share(fitted: dict, share: float) -> dict:
     """`fitted`'s values with `share` of its shot noise made diffusion noise instead (same ON share and
     per-pixel spread)."""
+    from simulator.config import SimulatorConfig
+
     total = fitted["shot_noise_rate_hz"] + fitted.get("diffusion_noise_rate_hz", 0.0)
-    on = min(max(fitted["shot_noise_on_fraction"], 0.001), 0.999)
+    lo, hi, _ = SimulatorConfig.BOUNDS["diffusion_noise_on_fraction"]    # a walk cannot be all ON or all OFF
+    on = min(max(fitted["shot_noise_on_fraction"], lo), hi)
     return {**fitted, "shot_noise_rate_hz": round((1 - share) * total, 6),
             "diffusion_noise_rate_hz": round(share * total, 6), "diffusion_noise_on_fraction": round(on, 3),
             "diffusion_noise_sigma_decades": fitted["shot_noise_sigma_decades"]}

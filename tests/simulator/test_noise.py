@@ -126,12 +126,12 @@ def test_lowpass_step_in_place_equals_the_formula(rng):
     np.testing.assert_allclose(lowpass_step(lp, new, inten + 1e9, 1e-4, 300.0), new)
 
 
-def _still(cfg, level, seconds=2.0, w=100, h=100, seed=0):
+def _still(cfg, level, seconds=2.0, w=100, h=100, seed=0, dt_s=0.01):
     from simulator import simulate
 
     f = np.full((h, w), level, np.float32)
-    n = int(seconds * 100)
-    return simulate([f] * (n + 1), [10_000 * k for k in range(n + 1)], cfg, seed=seed).events
+    n = int(round(seconds / dt_s))
+    return simulate([f] * (n + 1), [round(k * dt_s * 1e6) for k in range(n + 1)], cfg, seed=seed).events
 
 
 def test_shot_noise_share_light_and_spread():
@@ -181,9 +181,7 @@ SIEGMUND = 0.5826   # a Gaussian walk's mean overshoot of a barrier, in steps' s
 def _walk_run(rate, c, dt_s, side, on_fraction, seconds, seed=1):
     cfg = SimulatorConfig(pos_threshold=c, neg_threshold=c, diffusion_noise_rate_hz=rate,
                           diffusion_noise_on_fraction=on_fraction)
-    n = int(round(seconds / dt_s))
-    frame = np.full((side, side), 0.5, np.float32)
-    ev = simulate([frame] * (n + 1), [round(k * dt_s * 1e6) for k in range(n + 1)], cfg, seed=seed).events
+    ev = _still(cfg, 0.5, seconds, side, side, seed, dt_s)
     pix = ev["y"].astype(np.int64) * side + ev["x"]
     order = np.lexsort((ev["t"], pix))
     return pix[order], ev["t"][order] * 1e-6, ev["p"][order]
