@@ -45,6 +45,11 @@ from pathlib import Path
 
 import numpy as np
 
+from tools.sensor_goal import DISTANCE, LOG_RATIO, goal, goal_lines
+
+# the goal's four figures in this check's figures (tools.sensor_goal): the camera's still pixels
+GOAL = {"W1 log rate": ("w1_log_rate", DISTANCE), "W1 log interval": ("w1_log_iei", DISTANCE),
+        "still-pixel noise": ("rate_hz", LOG_RATIO), "interval floor p0.1": ("iei_p0_1_us", LOG_RATIO)}
 FRAME_RATE_HZ = 200.0           # the still scene's frames (only noise and leak happen between them)
 
 
@@ -243,9 +248,18 @@ def compare(sim: dict, real: dict) -> dict:
     return {"w1_log_rate": w1(sim["log_rates"], real["log_rates"]), "w1_log_iei": w1(sim["log_iei"], real["log_iei"])}
 
 
+def sensor_figures(config, real: dict, width: int, height: int, duration_s: float, intensity: float) -> dict:
+    """A sensor's still scene at the clip's resolution for `duration_s`: its noise figures and its distances
+    to the camera's (`real`: noise_figures of the camera's still pixels on the same half)."""
+    sim = still_scene(config, width, height, duration_s, intensity)
+    f = noise_figures(sim, np.ones((height, width), bool), duration_s)
+    return {**{k: v for k, v in f.items() if not k.startswith("log_")}, **compare(f, real)}
+
+
 def main(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
+    from common.config import to_dict
     from eventio.formats import read_recording
     from simulator.config import SimulatorConfig
     from simulator.sensor_presets import load_sensor
@@ -286,6 +300,7 @@ def main(argv: list[str] | None = None) -> int:
         configs["fitted"] = replace(SimulatorConfig(), **fitted)
     if args.sensor:
         configs[args.sensor] = load_sensor(args.sensor, ("readout",) if fitted["readout_period_us"] else ())
+        out["sensor_values"] = to_dict(configs[args.sensor])     # what the report's row was made with
     print(f"{args.clip} ({fmt}, {stream.width}x{stream.height}, {len(e):,} events, {(t1 - t0) / 1e6:.2f} s): "
           f"{int(mask.sum()):,} still pixels ({mask.mean():.1%}); fitted on the first half: {fitted}\n")
     held = real["held_out"]
@@ -296,13 +311,15 @@ def main(argv: list[str] | None = None) -> int:
           f"{held['iei_p0_1_us']:.0f} | {held['regularity']:.2f} | {held['same_polarity']:.3f} | 0 | 0 |")
     out["configs"] = {}
     for name, cfg in configs.items():
-        sim = still_scene(cfg, stream.width, stream.height, dur["held_out"], args.intensity)
-        f = noise_figures(sim, np.ones_like(mask), dur["held_out"])
-        d = compare(f, held)
-        out["configs"][name] = {**{k: v for k, v in f.items() if not k.startswith("log_")}, **d}
+        f = out["configs"][name] = sensor_figures(cfg, held, stream.width, stream.height, dur["held_out"],
+                                                  args.intensity)
         print(f"| {name} | {f['rate_hz']:.4f} | {f['on_fraction']:.3f} | {f['hot_fraction']:.5f} | "
-              f"{f['iei_p0_1_us']:.0f} | {f['regularity']:.2f} | {f['same_polarity']:.3f} | {d['w1_log_rate']:.3f} | "
-              f"{d['w1_log_iei']:.3f} |")
+              f"{f['iei_p0_1_us']:.0f} | {f['regularity']:.2f} | {f['same_polarity']:.3f} | {f['w1_log_rate']:.3f} | "
+              f"{f['w1_log_iei']:.3f} |")
+    if args.sensor:
+        verdict = goal(out["configs"], held, args.sensor, GOAL)
+        out["goal"] = verdict
+        print("\n" + "\n".join(goal_lines(verdict, args.sensor)))
     if args.json:
         write_json(args.json, out)
     return 0

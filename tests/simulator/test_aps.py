@@ -89,6 +89,15 @@ def test_the_fit_objective_is_zero_at_the_camera_and_the_wide_fit_adds_the_floor
     assert set(FIT_GRID) == set(WIDE_GRID) and FIT_GRID["threshold_sigma"] == (0.03,)
 
 
+def test_the_wide_fit_refines_the_refractory_period_between_the_grids_steps():
+    from tools.aps_check import REFINE_REACH_US, WIDE_GRID, refractory_refinement
+
+    assert refractory_refinement(500) == [350, 400, 450, 550, 600, 650]
+    assert refractory_refinement(100) == [50, 150, 200, 250]           # periods stay positive
+    steps = np.diff(WIDE_GRID["refractory_us"])
+    assert all(s / 2 <= REFINE_REACH_US for s in steps)     # it reaches halfway to each grid neighbour
+
+
 def test_a_pixel_that_never_changes_stays_still_in_between_along_the_flow():
     rng = np.random.default_rng(0)
     import cv2
