@@ -21,7 +21,7 @@ this simulator (not v2e itself). `--fit --wide` searches `WIDE_GRID` (thresholds
 pixel-to-pixel spread, refractory 250-1000 us), adds the inter-event-interval floor's (p0.1)
 log10 ratio to the objective, and then refines the best point's refractory period in 50 us steps
 (+-150 us): how configs/sensors/davis346.yaml was fitted (docs/results/sensors.md). The report ends
-with the goal's verdict for `davis346` (tools.sensor_goal): closer to the camera than every v2e preset
+with the goal's verdict for `davis346` (eventio.realism_goal): closer to the camera than every v2e preset
 on the two distances, the still-pixel noise and the interval floor, on the held-out half.
 """
 from __future__ import annotations
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.sensor_goal import DISTANCE, LOG_RATIO, goal, goal_lines
+from eventio.realism_goal import DISTANCE, LOG_RATIO, goal, goal_lines
 
 RATE_HZ = 2000.0
 
@@ -46,7 +46,7 @@ V2E = {"v2e defaults": dict(pos_threshold=0.2, neg_threshold=0.2, threshold_sigm
                          leak_rate_hz=0.1, shot_noise_rate_hz=5.0)}
 
 
-# the goal's four figures in this check's figures (tools.sensor_goal)
+# the goal's four figures in this check's figures (eventio.realism_goal)
 GOAL = {"W1 log rate": ("w1_log_rate", DISTANCE), "W1 log interval": ("w1_log_iei", DISTANCE),
         "still-pixel noise": ("static_rate_hz", LOG_RATIO), "interval floor p0.1": ("iei_p0_1_us", LOG_RATIO)}
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.sensor_goal import DISTANCE, LOG_RATIO, figure_distance, goal, goal_lines
+from eventio.realism_goal import DISTANCE, LOG_RATIO, figure_distance, goal, goal_lines
 
 KEYS = {"rate": ("w1", DISTANCE), "noise": ("hz", LOG_RATIO)}
 DAVIS346 = Path(__file__).resolve().parents[3] / "shared" / "reference" / "real-clips" / "davis346_aedat-2.3.0.aedat4"
