@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from eventio.realism_goal import DISTANCE, LOG_RATIO, goal, goal_lines
+from eventio.realism_goal import goal, goal_figures, goal_lines
 
 RATE_HZ = 2000.0
 
@@ -47,8 +47,7 @@ V2E = {"v2e defaults": dict(pos_threshold=0.2, neg_threshold=0.2, threshold_sigm
 
 
 # the goal's four figures in this check's figures (eventio.realism_goal)
-GOAL = {"W1 log rate": ("w1_log_rate", DISTANCE), "W1 log interval": ("w1_log_iei", DISTANCE),
-        "still-pixel noise": ("static_rate_hz", LOG_RATIO), "interval floor p0.1": ("iei_p0_1_us", LOG_RATIO)}
+GOAL = goal_figures("static_rate_hz")
 
 
 def read_clip(path: Path) -> tuple[np.ndarray, np.ndarray, object]:
@@ -174,8 +173,8 @@ def fit(frames, t_us, real, static, log=print, wide: bool = False, motion: str =
 def refractory_refinement(refractory_us: int, step_us: int = REFINE_STEP_US) -> list[int]:
     """The refractory periods --wide tries after the grid: `step_us` apart, out to half the grid's spacing
     on each side of the grid's best (not the best itself)."""
-    reach = REFINE_REACH_US
-    return [r for r in range(refractory_us - reach, refractory_us + reach + 1, step_us) if r > 0 and r != refractory_us]
+    return [r for r in range(refractory_us - REFINE_REACH_US, refractory_us + REFINE_REACH_US + 1, step_us)
+            if r > 0 and r != refractory_us]
 
 
 def main(argv: list[str] | None = None) -> int:

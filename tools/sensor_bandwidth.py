@@ -21,21 +21,23 @@ FRAME_RATE_HZ = 3000.0 * 26.2
 WIDTH, HEIGHT, EDGE_START_PX, GRATING_PERIOD_PX = 200, 4, 20.0, 8.0
 
 
-def edge_frames(speed_px_per_us: float, duration_us: float, bright: float, dark: float):
-    """(frame [H, W], t_us) of a bright-to-dark edge moving right from EDGE_START_PX."""
+def _frames(pattern, duration_us: float):
+    """(frame [H, W], t_us) at FRAME_RATE_HZ over duration_us: pattern(x [1, W], t_us) -> a row [1, W]."""
     x = np.arange(WIDTH)[None, :] + 0.5
     dt = 1e6 / FRAME_RATE_HZ
     for i in range(int(duration_us / dt) + 1):
-        edge = EDGE_START_PX + speed_px_per_us * i * dt
-        yield np.where(x < edge, bright, dark) * np.ones((HEIGHT, 1)), int(round(i * dt))
+        yield pattern(x, i * dt) * np.ones((HEIGHT, 1)), int(round(i * dt))
+
+
+def edge_frames(speed_px_per_us: float, duration_us: float, bright: float, dark: float):
+    """A bright-to-dark edge moving right from EDGE_START_PX."""
+    return _frames(lambda x, t: np.where(x < EDGE_START_PX + speed_px_per_us * t, bright, dark), duration_us)
 
 
 def grating_frames(speed_px_per_us: float, duration_us: float):
-    x = np.arange(WIDTH)[None, :] + 0.5
-    dt = 1e6 / FRAME_RATE_HZ
-    for i in range(int(duration_us / dt) + 1):
-        f = 0.3 + 0.2 * np.sin(2 * np.pi * (x - speed_px_per_us * i * dt) / GRATING_PERIOD_PX)
-        yield f * np.ones((HEIGHT, 1)), int(round(i * dt))
+    """A sinusoid of GRATING_PERIOD_PX between 0.1 and 0.5 moving right."""
+    return _frames(lambda x, t: 0.3 + 0.2 * np.sin(2 * np.pi * (x - speed_px_per_us * t) / GRATING_PERIOD_PX),
+                   duration_us)
 
 
 def crossed_pixels(speed_px_per_us: float, duration_us: float) -> np.ndarray:
