@@ -26,44 +26,59 @@ class _Stopped(Exception):
     pass
 
 
-def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict,
-          snapshots: list[float] = SNAPSHOTS, max_train_s: float | None = None) -> list[dict]:
-    """The run's curve; with max_train_s the run stops once its training seconds reach it (a model saved
-    there is the last point, marked "stopped"), for a recipe compared at a time budget it overruns."""
+def run_overrides(method: str, config: str, field: str, scale: float, sets: dict,
+                  snapshots: list[float] = SNAPSHOTS) -> dict:
+    """The overrides one curve's run trains with: the field, its snapshots, the iterations x scale and
+    (scale != 1) the schedule scaled along; `sets` last."""
     import recon
-    from scene_format.reader import SceneDataset
 
     base = recon.resolve_config(method, config)
     iters = max(1, int(round(base.train.iterations * scale)))
-    overrides = {"train.deform_field.kind": field, "train.snapshots": sorted(set(snapshots)), "train.iterations": iters,
-                 **sets}
+    overrides = {"train.deform_field.kind": field, "train.snapshots": sorted(set(snapshots)), "train.iterations": iters}
     if scale != 1:
         # the schedule scales along: a recipe already scaled keeps the budget its numbers are written for
         reference = base.train.schedule_reference if base.train.scale_schedule else base.train.iterations
         overrides.update({"train.scale_schedule": True, "train.schedule_reference": reference})
-    run_dir = out / f"{method}_{field}"
+    return {**overrides, **sets}
+
+
+def train_until(scene, method: str, config: str, overrides: dict, run_dir: Path, until_s: float | None,
+                keep_initial: bool = True) -> dict:
+    """Train (or resume) the run in run_dir until its training seconds reach until_s (None: to its end).
+    -> {"log", "initial" (None unless keep_initial), "stop"}: "stop" is None for a finished run, else the
+    iteration, seconds and size where it stopped; its model is saved as run_dir/stopped.pt and its
+    checkpoint kept, so the next call resumes it exactly (the RNG states travel with the checkpoint)."""
+    import recon
+
     stop = {}
 
     def budget(trainer, it):
-        if max_train_s is not None and trainer.wall_s >= max_train_s and it < trainer.tcfg.iterations:
+        if until_s is not None and trainer.wall_s >= until_s and it < trainer.tcfg.iterations:
             trainer.model.save(run_dir / "stopped.pt")
             trainer._save_checkpoint()      # resumable, and its snapshots stay (a run with no checkpoint is removed)
             stop.update(iteration=it, wall_s=trainer.wall_s, n_gaussians=len(trainer.model), log=list(trainer.log),
-                        initial=trainer.initial_model())
+                        initial=trainer.initial_model() if keep_initial else None)
             raise _Stopped
     try:
-        result = recon.fit(scene, method, config, run_dir, overrides=overrides, progress=False, keep_initial=True,
-                           on_iteration=budget if max_train_s is not None else None)
-        log, initial = result.log, result.initial
+        result = recon.fit(scene, method, config, run_dir, overrides=overrides, progress=False,
+                           keep_initial=keep_initial, on_iteration=budget if until_s is not None else None)
+        return {"log": list(result.log), "initial": result.initial, "stop": None}
     except _Stopped:
-        log, initial = stop["log"], stop["initial"]
-    dataset = SceneDataset(scene)
+        return {"log": stop.pop("log"), "initial": stop.pop("initial"), "stop": stop}
+
+
+def score_run(dataset, run_dir: Path, trained: dict, initial) -> list[dict]:
+    """The curve of a run trained by train_until: the untrained model at 0 s, every snapshot in its log
+    and (a stopped run) its model at the stop, each scored as the benchmark scores (recon.evaluate)."""
+    import recon
+
     points = []
-    for row in log:
+    for row in trained["log"]:
         if "snapshot" in row:
             s = recon.evaluate(recon.load(run_dir / row["snapshot"]), dataset)
             points.append({"iteration": row["iteration"], "wall_s": row["wall_s"], "psnr": s["psnr"],
                            "psnr_dyn": s.get("psnr_dyn"), "n_gaussians": row["n_gaussians"]})
+    stop = trained["stop"]
     if stop:
         s = recon.evaluate(recon.load(run_dir / "stopped.pt"), dataset)
         points.append({"iteration": stop["iteration"], "wall_s": round(stop["wall_s"], 3), "psnr": s["psnr"],
@@ -71,6 +86,18 @@ def curve(scene: str, method: str, config: str, field: str, scale: float, out: P
     floor = recon.evaluate(initial, dataset)        # the untrained model the run starts from
     return [{"iteration": 0, "wall_s": 0.0, "psnr": floor["psnr"], "psnr_dyn": floor.get("psnr_dyn"),
              "n_gaussians": len(initial)}] + points
+
+
+def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict,
+          snapshots: list[float] = SNAPSHOTS, max_train_s: float | None = None) -> list[dict]:
+    """The run's curve; with max_train_s the run stops once its training seconds reach it (a model saved
+    there is the last point, marked "stopped"), for a recipe compared at a time budget it overruns."""
+    from scene_format.reader import SceneDataset
+
+    run_dir = out / f"{method}_{field}"
+    trained = train_until(scene, method, config, run_overrides(method, config, field, scale, sets, snapshots),
+                          run_dir, max_train_s)
+    return score_run(SceneDataset(scene), run_dir, trained, trained["initial"])
 
 
 def main(argv=None) -> int:

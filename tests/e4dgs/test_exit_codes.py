@@ -13,7 +13,8 @@ import pytest
 from tests.e4dgs.test_sweep import PARSERS, ROOT, run_cli
 
 # What each command's other required options get (a plausible value; the missing input must fail first).
-FILLERS = {"fps": "3000", "format": "npz", "name": "mine", "inputs": "events", "method": "e4dgs", "config": "e4dgs/quick"}
+FILLERS = {"fps": "3000", "format": "npz", "name": "mine", "inputs": "events", "method": "e4dgs", "config": "e4dgs/quick",
+           "recipe": "quick=e4dgs/quick:mlp"}
 # Options and positionals that are outputs or optional settings, not inputs read.
 OUTPUTS = {"out", "json", "picture", "export"}
 # Inputs that are not files: left out of the sweep, each with why.

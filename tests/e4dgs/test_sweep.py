@@ -59,7 +59,8 @@ def all_parsers() -> dict[str, argparse.ArgumentParser]:
 
 
 PARSERS = all_parsers()
-TEXT_TYPES = {"Path", "name_list", "output_file", "existing_folder", "existing_file", "str"}
+TEXT_TYPES = {"Path", "name_list", "output_file", "existing_folder", "existing_file", "str",
+              "run_spec"}   # tools/curves_alternated NAME=CONFIG:FIELD[:SCALE]: SCALE through positive_float
 NUMERIC = [(cmd, a) for cmd, p in PARSERS.items() for a in p._actions
            if a.type is not None and getattr(a.type, "__name__", "") not in TEXT_TYPES]
 
