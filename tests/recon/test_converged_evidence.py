@@ -45,3 +45,68 @@ def test_the_evidence_meets_the_goal_within_900_s(scene):
     assert any(p["psnr"] >= whole for p in within)
     if moving is not None:
         assert any(p["psnr_dyn"] >= moving for p in within)
+
+
+# -- the three recipes alternated in one process (tools.curves_alternated) ----------------------------
+def alternated(scene):
+    return json.loads((EVIDENCE / f"alternated_curves_{scene}_e4dgs_2threads.json").read_text())
+
+
+def differences(ran, shipped, where=""):
+    """The keys where the config a run recorded differs from what the code and recipes resolve today."""
+    if isinstance(shipped, dict) and isinstance(ran, dict):
+        return [d for k in sorted(set(ran) | set(shipped))
+                for d in differences(ran.get(k, "<absent>"), shipped.get(k, "<absent>"), f"{where}.{k}")]
+    if isinstance(shipped, (list, tuple)) and isinstance(ran, (list, tuple)):
+        return [] if list(ran) == list(shipped) else [f"{where[1:]}: ran {ran}, resolves to {shipped}"]
+    return [] if ran == shipped else [f"{where[1:]}: ran {ran!r}, resolves to {shipped!r}"]
+
+
+@pytest.mark.parametrize("scene", sorted(GOALS))
+def test_the_alternated_runs_are_todays_recipes(scene):
+    """Each curve was trained with exactly what its recipe resolves to today (snapshots aside)."""
+    from common.config import to_dict
+    import recon
+    from tools.field_curves import run_overrides
+
+    ev = alternated(scene)
+    assert [r["name"] for r in ev["runs"]] == ["converged", "trajectory", "mlp"]
+    assert ev["max_train_s"] == 900
+    for r in ev["runs"]:
+        ran = ev["configs"][r["name"]]
+        overrides = run_overrides("e4dgs", str(REPO / r["config"]), r["field"], r["scale"], {}, ran["train"]["snapshots"])
+        shipped = to_dict(recon.resolve_config("e4dgs", str(REPO / r["config"]), overrides))
+        assert not differences(ran, shipped), (r["name"], differences(ran, shipped))
+
+
+@pytest.mark.parametrize("scene", sorted(GOALS))
+def test_the_alternated_runs_say_what_the_docs_say(scene):
+    """docs/results/learning_curves.md ("The three recipes side by side, in turns"): in the alternated
+    run `converged` leads both other recipes at 900 s on every pixel and on the moving ones; lego passes
+    its goal before 900 s (its model at the stop, just after a densification, does not); hinge, on a
+    slower host state, meets neither of its goals by 900 s."""
+    whole, moving = GOALS[scene]
+    ev = alternated(scene)
+    at_stop = {name: curve[-1] for name, curve in ev["curves"].items()}
+    for name, last in at_stop.items():
+        assert last.get("stopped") and 900 <= last["wall_s"] <= 901, name
+    for other in ("trajectory", "mlp"):
+        assert at_stop["converged"]["psnr"] > at_stop[other]["psnr"] + 1.5
+        assert at_stop["converged"]["psnr_dyn"] > at_stop[other]["psnr_dyn"] + 0.9
+    reached = ev["reached_s"]["converged"]
+    if scene == "lego":
+        assert reached["psnr"] is not None and 600 < reached["psnr"] < 700
+        assert at_stop["converged"]["psnr"] < whole                 # the stop 3 steps after a densification
+    else:
+        assert reached["psnr"] is None and reached["psnr_dyn"] is None
+        assert whole - 0.2 < at_stop["converged"]["psnr"] < whole and moving - 0.3 < at_stop["converged"]["psnr_dyn"] < moving
+
+
+@pytest.mark.parametrize("scene", sorted(GOALS))
+def test_the_turns_alternate(scene):
+    """Every recipe trained in each round, in order, before the next round began."""
+    ev = alternated(scene)
+    order = [(s["round"], s["run"]) for s in ev["slices"]]
+    assert order == sorted(order, key=lambda x: (x[0], ["converged", "trajectory", "mlp"].index(x[1])))
+    assert {s["round"] for s in ev["slices"]} == set(range(1, 7))
+    assert all(s["until_s"] == 150 * s["round"] for s in ev["slices"])
