@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 from common.argtypes import float_in
-from tools.field_curves import run_overrides, score_run, train_until
+from tools.field_curves import curves_table, run_overrides, score_run, train_until
 from tools.tool_cli import existing_folder, positive_float, run_tool
 
 SNAPSHOTS = [round(0.05 * k, 2) for k in range(1, 21)]
@@ -131,12 +131,7 @@ def main(argv=None) -> int:
               "slices": done["slices"]}
     (out / "alternated_curves.json").write_text(json.dumps(record, indent=1))
     print(f"{args.method} on {args.scene.name}, CPU {cpu_summary()}, {args.slice_s:g} s slices in turn")
-    print("| run | iteration | train s | PSNR | moving-pixel PSNR | Gaussians |\n|---|---:|---:|---:|---:|---:|")
-    for name, points in curves.items():
-        for p in points:
-            dyn = "–" if p["psnr_dyn"] is None else f"{p['psnr_dyn']:.2f}"
-            it = f"{p['iteration']} (stopped)" if p.get("stopped") else p["iteration"]
-            print(f"| {name} | {it} | {p['wall_s']:.0f} | {p['psnr']:.2f} | {dyn} | {p['n_gaussians']} |")
+    print(curves_table(curves, "run"))
     for name, r in reached.items():
         for key, s in r.items():
             what = "PSNR" if key == "psnr" else "moving-pixel PSNR"

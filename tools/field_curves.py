@@ -88,6 +88,18 @@ def score_run(dataset, run_dir: Path, trained: dict, initial) -> list[dict]:
              "n_gaussians": len(initial)}] + points
 
 
+def curves_table(curves: dict[str, list[dict]], label: str) -> str:
+    """Markdown: one row per scored point of every curve (a stopped run's last point marked)."""
+    lines = [f"| {label} | iteration | train s | PSNR | moving-pixel PSNR | Gaussians |",
+             "|---|---:|---:|---:|---:|---:|"]
+    for name, points in curves.items():
+        for p in points:
+            dyn = "–" if p["psnr_dyn"] is None else f"{p['psnr_dyn']:.2f}"
+            it = f"{p['iteration']} (stopped)" if p.get("stopped") else p["iteration"]
+            lines.append(f"| {name} | {it} | {p['wall_s']:.0f} | {p['psnr']:.2f} | {dyn} | {p['n_gaussians']} |")
+    return "\n".join(lines)
+
+
 def curve(scene: str, method: str, config: str, field: str, scale: float, out: Path, sets: dict,
           snapshots: list[float] = SNAPSHOTS, max_train_s: float | None = None) -> list[dict]:
     """The run's curve; with max_train_s the run stops once its training seconds reach it (a model saved
@@ -124,12 +136,7 @@ def main(argv=None) -> int:
     (out / f"{args.method}_curves.json").write_text(json.dumps({"cpu": cpu_summary(), "scene": args.scene,
                                                                  "method": args.method, "curves": results}, indent=1))
     print(f"{args.method} on {Path(args.scene).name}, CPU {cpu_summary()}")
-    print("| field | iteration | train s | PSNR | moving-pixel PSNR | Gaussians |\n|---|---:|---:|---:|---:|---:|")
-    for field, points in results.items():
-        for p in points:
-            dyn = "–" if p["psnr_dyn"] is None else f"{p['psnr_dyn']:.2f}"
-            it = f"{p['iteration']} (stopped)" if p.get("stopped") else p["iteration"]
-            print(f"| {field} | {it} | {p['wall_s']:.0f} | {p['psnr']:.2f} | {dyn} | {p['n_gaussians']} |")
+    print(curves_table(results, "field"))
     return 0
 
 

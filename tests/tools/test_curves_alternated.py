@@ -79,3 +79,13 @@ def test_a_finished_run_sits_out_later_rounds(motion_scene, tmp_path):
                      snapshots=[1.0], sets=short, log=lambda *_: None)
     assert [s["run"] for s in done["slices"]] == ["short"] and done["slices"][0]["finished"]
     assert done["slices"][0]["iteration"] == 3 and done["trained"]["short"]["stop"] is None
+
+
+def test_the_table_marks_the_stop_and_a_missing_moving_score():
+    from tools.field_curves import curves_table
+
+    text = curves_table({"a": [{"iteration": 0, "wall_s": 0.0, "psnr": 30.0, "psnr_dyn": None, "n_gaussians": 5},
+                               {"iteration": 9, "wall_s": 9.4, "psnr": 31.234, "psnr_dyn": 20.0, "n_gaussians": 6,
+                                "stopped": True}]}, "run").splitlines()
+    assert text[0].startswith("| run |") and text[2] == "| a | 0 | 0 | 30.00 | – | 5 |"
+    assert text[3] == "| a | 9 (stopped) | 9 | 31.23 | 20.00 | 6 |"
