@@ -1,5 +1,5 @@
 """Learning curves of several recipes on one scene, trained in alternation: each run in turn trains
-for --slice-s more training seconds (resumed exactly from its checkpoint), round after round, until
+for --slice-s more training seconds (resumed exactly from its checkpoint), pass after pass, until
 each reaches --max-train-s or its end. A host whose speed drifts over minutes (a shared VM) then slows
 every recipe alike, so their seconds compare; one recipe run after another would carry the drift.
 
@@ -11,7 +11,7 @@ every recipe alike, so their seconds compare; one recipe run after another would
 
 A --recipe is NAME=CONFIG:FIELD[:SCALE] (SCALE: multiple of the config's iterations, the schedule
 scaled along, as tools.field_curves does). Each run trains into --out/<scene>/<NAME>, so a killed
-comparison resumes where it stopped. After the last round every snapshot is scored as the benchmark
+comparison resumes where it stopped. After the last pass every snapshot is scored as the benchmark
 scores (recon.evaluate). Writes <out>/<scene>/alternated_curves.json (curves, every slice's steps and
 seconds, the CPU) and prints the curves and, with --goal, the training seconds at which each run
 first reaches it (linear between scored points).
@@ -63,7 +63,7 @@ def crossing_s(curve: list[dict], key: str, goal: float) -> float | None:
 
 def alternate(scene: str, method: str, runs: list[dict], out: Path, max_train_s: float, slice_s: float,
               snapshots: list[float] = SNAPSHOTS, sets: dict | None = None, log=print) -> dict:
-    """Train the runs in rounds of slice_s training seconds each, in the given order, to max_train_s;
+    """Train the runs in passes of slice_s training seconds each, in the given order, to max_train_s;
     -> {"slices": [...], "trained": {name: train_until's last answer}, "initial": {name: model}}."""
     sets = sets or {}
     rounds = max(1, math.ceil(max_train_s / slice_s - 1e-9))
@@ -75,7 +75,7 @@ def alternate(scene: str, method: str, runs: list[dict], out: Path, max_train_s:
         for r in runs:
             st = state[r["name"]]
             if st["trained"] is not None and st["trained"]["stop"] is None:
-                continue                                   # finished its schedule in an earlier round
+                continue                                   # finished its schedule in an earlier pass
             t0 = time.time()
             trained = train_until(scene, method, r["config"], st["overrides"], out / r["name"], until,
                                   keep_initial=st["initial"] is None)
@@ -87,7 +87,7 @@ def alternate(scene: str, method: str, runs: list[dict], out: Path, max_train_s:
             slices.append({"round": k, "run": r["name"], "until_s": until, "iteration": end["iteration"],
                            "train_s": round(end["wall_s"], 3), "elapsed_s": round(time.time() - t0, 1),
                            "finished": trained["stop"] is None})
-            log(f"round {k}/{rounds} {r['name']}: iteration {end['iteration']}, {end['wall_s']:.0f} s trained"
+            log(f"pass {k}/{rounds} {r['name']}: iteration {end['iteration']}, {end['wall_s']:.0f} s trained"
                 f"{' (finished)' if trained['stop'] is None else ''}")
     return {"slices": slices, "trained": {n: s["trained"] for n, s in state.items()},
             "initial": {n: s["initial"] for n, s in state.items()}}

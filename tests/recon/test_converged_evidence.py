@@ -104,7 +104,7 @@ def test_the_alternated_runs_say_what_the_docs_say(scene):
 
 @pytest.mark.parametrize("scene", sorted(GOALS))
 def test_the_turns_alternate(scene):
-    """Every recipe trained in each round, in order, before the next round began."""
+    """Every recipe took its turn in each pass (the slices' "round"), in order, before the next pass began."""
     ev = alternated(scene)
     order = [(s["round"], s["run"]) for s in ev["slices"]]
     assert order == sorted(order, key=lambda x: (x[0], ["converged", "trajectory", "mlp"].index(x[1])))

@@ -40,7 +40,7 @@ def test_turns_alternate_and_slicing_changes_nothing(motion_scene, tmp_path):
                      snapshots=[0.5, 1.0], sets=SETS, log=lambda *_: None)
     slices = done["slices"]
     assert [s["run"] for s in slices] == ["a", "b"] * 3 and [s["round"] for s in slices] == [1, 1, 2, 2, 3, 3]
-    for s in slices:                          # each turn ends at its round's budget, one step past at most
+    for s in slices:                          # each turn ends at its pass's budget, one step past at most
         assert s["train_s"] >= s["until_s"] and not s["finished"]
     for name in "ab":
         mine = [s for s in slices if s["run"] == name]
@@ -72,7 +72,7 @@ def test_turns_alternate_and_slicing_changes_nothing(motion_scene, tmp_path):
         torch.testing.assert_close(q, p, rtol=1e-5, atol=1e-6, msg=name)
 
 
-def test_a_finished_run_sits_out_later_rounds(motion_scene, tmp_path):
+def test_a_finished_run_sits_out_later_passes(motion_scene, tmp_path):
     runs = [{"name": "short", "config": None, "field": "trajectory", "scale": 1.0}]
     short = {**SETS, "train.iterations": 3}
     done = alternate(str(motion_scene), "d3dgs", runs, tmp_path / "alt", max_train_s=30.0, slice_s=10.0,
