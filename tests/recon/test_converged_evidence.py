@@ -174,6 +174,10 @@ def test_the_narrower_field_lead_says_what_the_docs_say():
     assert last["psnr"] > turns[-1]["psnr"] + 0.25 and last["psnr_dyn"] > turns[-1]["psnr_dyn"] + 0.15
     at = {p["iteration"]: p for p in curve}
     assert abs(at[7560]["psnr"] - next(p["psnr"] for p in turns if p["iteration"] == 7560)) < 0.05
+    lego = json.loads((EVIDENCE / "field_curves_lego_e4dgs_converged_width96_900s_2threads_zen3.json").read_text())
+    assert sets_of(lego["command"]) == {"train.deform_field.width": "96"}
+    lego_turns = alternated("lego")["curves"]["converged"]
+    assert lego["curves"]["mlp"][-1]["psnr"] > GOALS["lego"][0] and abs(lego["curves"]["mlp"][-1]["psnr"] - lego_turns[-1]["psnr"]) < 0.1
 
 
 @pytest.mark.parametrize("which", RUNS)
