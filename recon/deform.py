@@ -74,6 +74,49 @@ class DeformationField(nn.Module):
                 h = torch.relu(layer(h))
         return self.warp(h), self.rotation(h), self.scaling(h)
 
+    def deform_times(self, gaussians, times: list[float]):
+        """[(dx, dq, dlog_s)] of `gaussians` at each normalised time: `forward_times` at their inputs."""
+        return self.forward_times(gaussians.deformation_inputs(), times)
+
+    def forward_times(self, x: torch.Tensor, times: list[float]):
+        """x [N, 3] canonical positions, K scalar times in [0, 1] -> K (dx [N, 3], dq [N, 4], dlog_s [N, 3]),
+        equal to [self(x, t) for t in times] to rounding (tests/recon/test_deform_size.py).
+
+        The time's encoding is one vector per time, so in the two layers that read the encoded input
+        (the first and the one after the skip) the position columns' product gamma(x) W_x is shared by
+        all K times and the time columns' product is a per-time bias: a step that renders the start and
+        end of an event window computes gamma(x) and those two products once. A 4 x 96 field at 5,650
+        points, K = 2, forward + backward: ~12 % less time than two calls (docs/design/recon.md).
+        """
+        x = x.detach()
+        t = torch.as_tensor([float(v) for v in times], dtype=x.dtype, device=x.device)
+        if t.ndim != 1 or t.numel() == 0 or not torch.all((t >= 0) & (t <= 1)):
+            raise ValueError(f"deformation field: expected one or more times in [0, 1], got {list(times)}")
+        ex, et = positional_encoding(x, self.x_freqs), positional_encoding(t[:, None], self.t_freqs)  # [N, 63], [K, 13]
+        if torch.is_autocast_enabled(x.device.type):
+            dt = torch.get_autocast_dtype(x.device.type)
+            ex, et = ex.to(dt), et.to(dt)
+        n_x, n_emb = ex.shape[1], ex.shape[1] + et.shape[1]
+
+        def split(layer):     # (gamma(x) W_x [N, w] shared, gamma(t) W_t + b [K, w] per time)
+            w = layer.weight
+            return F.linear(ex, w[:, :n_x]), F.linear(et, w[:, n_x:n_emb], layer.bias)
+
+        a0, c0 = split(self.layers[0])
+        has_skip = self.skip + 1 < len(self.layers)
+        a_skip, c_skip = split(self.layers[self.skip + 1]) if has_skip else (None, None)
+        outs = []
+        for k in range(len(t)):         # one time at a time: 5-10 % faster on a CPU than one [K N] product
+            h = torch.relu(a0 + c0[k])
+            for i in range(1, len(self.layers)):
+                layer = self.layers[i]
+                if i == self.skip + 1:
+                    h = torch.relu(torch.addmm(a_skip + c_skip[k], h, layer.weight[:, n_emb:].t()))
+                else:
+                    h = torch.relu(layer(h))
+            outs.append((self.warp(h), self.rotation(h), self.scaling(h)))
+        return outs
+
     def forward_ref(self, x: torch.Tensor, t: torch.Tensor | float):
         """Same as forward, as the public D3DGS code writes it: the encoded input concatenated to the
         hidden state after layer `skip` (forward splits that layer's product instead: 20-25 % less

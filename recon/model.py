@@ -22,7 +22,7 @@ from common.fileio import atomic_output
 from recon.deform import DeformationField, make_field
 from recon.gaussians import GaussianModel
 from recon.raster import Camera, RenderOutput
-from recon.render import camera_from_pose, check_time, render_at, render_views
+from recon.render import camera_from_pose, check_time, render_at, render_views, render_views_times
 
 FORMAT = "e4dgs-dynamic-gaussians/1"
 
@@ -90,6 +90,12 @@ class DynamicGaussians:
         """Differentiable renders of several cameras at time t, sharing one deformation evaluation."""
         field = self.deform if self.meta.deform_enabled else None
         return render_views(self.gaussians, field, cameras, t, self.background, backend, self.meta.precision)
+
+    def render_outputs_times(self, cameras: list[list[Camera]], times: list[float],
+                             backend: str = "auto") -> list[list[RenderOutput]]:
+        """Differentiable renders of cameras[k] at times[k], one deformation call for all the times."""
+        field = self.deform if self.meta.deform_enabled else None
+        return render_views_times(self.gaussians, field, cameras, times, self.background, backend, self.meta.precision)
 
     @torch.no_grad()
     def render(self, camera: Camera | int, t: float, backend: str = "auto") -> torch.Tensor:

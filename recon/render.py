@@ -55,6 +55,18 @@ def check_time(t: float) -> float:
     return t
 
 
+def deformed_times(gaussians: GaussianModel, field: DeformationField | None, times: list[float],
+                   precision: str = "float32") -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """[deformed(gaussians, field, t, precision) for t in times], with one field call for all times."""
+    means, quats, log_scales = gaussians.means, gaussians.quats, gaussians.log_scales
+    if field is None or len(gaussians) == 0:
+        return [(means, quats, log_scales) for _ in times]
+    with autocast(precision, means.device):
+        offsets = field.deform_times(gaussians, times)
+    return [(means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype))
+            for dx, dq, ds in offsets]
+
+
 def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float, precision: str = "float32"):
     """Means [N,3], quaternions [N,4] and log-scales [N,3] at normalised time t (field None: canonical);
     the field computes in `precision` (float32, or bfloat16 autocast; its outputs come back float32)."""
@@ -79,6 +91,20 @@ def render_views(gaussians: GaussianModel, field: DeformationField | None, camer
     check_time(t)
     state = deformed(gaussians, field, t, precision)
     return [render_deformed(gaussians, state, camera, background, backend) for camera in cameras]
+
+
+def render_views_times(gaussians: GaussianModel, field: DeformationField | None, cameras: list[list[Camera]],
+                       times: list[float], background: torch.Tensor, backend: str = "auto",
+                       precision: str = "float32") -> list[list[RenderOutput]]:
+    """`render_views` at several times: cameras[k] rendered at times[k], the field evaluated for all
+    times in one call (`deform_times`: the MLP shares the position encoding's work across them).
+    Returns one list of renders per time."""
+    if len(cameras) != len(times):
+        raise ValueError(f"render_views_times: one camera list per time expected, got {len(cameras)} lists "
+                         f"for {len(times)} times")
+    states = deformed_times(gaussians, field, [check_time(t) for t in times], precision)
+    return [[render_deformed(gaussians, state, c, background, backend) for c in cams]
+            for state, cams in zip(states, cameras)]
 
 
 def render_deformed(gaussians: GaussianModel, state: tuple[torch.Tensor, torch.Tensor, torch.Tensor],

@@ -147,6 +147,10 @@ class TrajectoryField(nn.Module):
     def spec(self) -> dict:
         return {"kind": self.kind, "degree": self.degree, "fourier": self.fourier}
 
+    def deform_times(self, gaussians, times: list[float]):
+        """[deform(gaussians, t) for t in times] (the interface the MLP field shares work through)."""
+        return [self.deform(gaussians, t) for t in times]
+
     def deform(self, gaussians, t: float):
         """(dx [N, 3], dq [N, 4], dlog_s [N, 3]) of `gaussians` at normalised time t."""
         if not 0.0 <= float(t) <= 1.0:

@@ -26,8 +26,8 @@ stalls hit both alike and the speed-up ratio comes from one run. `--precisions` 
 this tree's deformation MLP under several `train.precision` values (one worker each; `auto` shows what
 it resolved to; the precision is the MLP's, so these workers set `train.deform_field.kind: mlp`), so the
 MLP's dtypes are compared on one machine in one run; `--fields trajectory` adds a
-worker whose deformation is per-Gaussian trajectories; `--set KEY=VALUE` overrides every worker of this
-tree's config (e.g. `--set train.deform_field.width=128` for a smaller MLP); `--coarse 2 4` adds trajectory workers whose renders and targets are those of a
+worker whose deformation is per-Gaussian trajectories; `--set KEY=VALUE` overrides every worker's
+config, the revision's too (e.g. `--set train.deform_field.width=128` for a smaller MLP); `--coarse 2 4` adds trajectory workers whose renders and targets are those of a
 coarse-to-fine stage at 1/2 and 1/4 resolution (train.coarse_to_fine). Medians throughout; the CPU
 (model and its bf16-relevant flags) is printed above the table.
 """
@@ -106,29 +106,38 @@ def instrument(clock: Clock):
         timer(owner, name, "data")
     timer(TrajectoryField, "deform", "trajectory_fwd")
 
-    forward = DeformationField.forward
-    saved.append((DeformationField, "forward", forward))
+    def timed_field(name):
+        """DeformationField.<name> (forward: one time; forward_times: several, one list of outputs per
+        time) timed as mlp_fwd, and its backward from the first gradient reaching an output to the
+        first layer's weight gradient as mlp_bwd."""
+        fn = getattr(DeformationField, name, None)
+        if fn is None:        # an older tree (--against) without it
+            return
+        saved.append((DeformationField, name, fn))
 
-    def timed_forward(self, x, t):
-        t0 = time.perf_counter()
-        outs = forward(self, x, t)
-        clock.add("mlp_fwd", time.perf_counter() - t0)
-        if torch.is_grad_enabled() and outs[0].requires_grad:
-            key = id(outs[0])
+        def timed(self, x, t):
+            t0 = time.perf_counter()
+            outs = fn(self, x, t)
+            clock.add("mlp_fwd", time.perf_counter() - t0)
+            flat = [o for out in outs for o in out] if name == "forward_times" else list(outs)
+            if torch.is_grad_enabled() and flat[0].requires_grad:
+                key = id(flat[0])
 
-            def started(grad):
-                clock.mlp_started.setdefault(key, time.perf_counter())
-            for o in outs:
-                o.register_hook(started)
-            first = _first_layer_node(outs[0].grad_fn, self.layers[0].weight)
-            if first is not None:
-                def finished(*_):
-                    begin = clock.mlp_started.pop(key, None)
-                    if begin is not None:
-                        clock.add("mlp_bwd", time.perf_counter() - begin)
-                first.register_hook(finished)
-        return outs
-    DeformationField.forward = timed_forward
+                def started(grad):
+                    clock.mlp_started.setdefault(key, time.perf_counter())
+                for o in flat:
+                    o.register_hook(started)
+                first = _first_layer_node(flat[0].grad_fn, self.layers[0].weight)
+                if first is not None:
+                    def finished(*_):
+                        begin = clock.mlp_started.pop(key, None)
+                        if begin is not None:
+                            clock.add("mlp_bwd", time.perf_counter() - begin)
+                    first.register_hook(finished)
+            return outs
+        setattr(DeformationField, name, timed)
+    timed_field("forward")
+    timed_field("forward_times")
 
     def restore():
         for owner, name, value in reversed(saved):
@@ -275,6 +284,13 @@ def revision_factors(coarse: list[int]) -> list[int]:
     return [1, *coarse]
 
 
+def revision_specs(rev: str, coarse: list[int], sets: dict) -> list[tuple[str, dict, int]]:
+    """(label, config overrides, render factor) of the --against revision's workers: one per
+    `revision_factors`, each with the same --set overrides as this tree's, so the two trees differ
+    in their code only."""
+    return [(rev + (f", 1/{f} resolution" if f > 1 else ""), dict(sets), f) for f in revision_factors(coarse)]
+
+
 class Tree:
     def __init__(self, label: str, root: Path, threads: int, overrides: dict | None = None, factor: int = 1):
         env = dict(os.environ, PYTHONPATH=str(root), OMP_NUM_THREADS=str(threads), MKL_NUM_THREADS=str(threads),
@@ -342,7 +358,7 @@ def main(argv=None) -> int:
                          "Gaussians, and its field where a worker's is of the same kind and size (--phases is "
                          "then a label)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="a config override of every worker of this tree (e.g. train.deform_field.width=128); repeatable")
+                    help="a config override of every worker, the --against revision's too (e.g. train.deform_field.width=128); repeatable")
     ap.add_argument("--worker", type=nonnegative_int, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker is not None:
@@ -362,8 +378,8 @@ def main(argv=None) -> int:
                  for label, overrides, factor in worker_specs(args.precisions, args.fields, args.coarse)]
         if args.against:   # the revision at full size and at each coarse factor asked for
             old_root = stack.enter_context(checkout(args.against))
-            trees += [Tree(args.against + (f", 1/{f} resolution" if f > 1 else ""), old_root, args.threads,
-                           None, f) for f in revision_factors(args.coarse)]
+            trees += [Tree(label, old_root, args.threads, overrides, f)
+                      for label, overrides, f in revision_specs(args.against, args.coarse, sets)]
         print(f"Training iteration at the scene's resolution, {Path(scene).name}, {args.threads} thread(s), "
               f"deformation on, median of {args.iters} (ms; it/s); CPU: {cpu_summary()}")
         print("| method | model | tree | Gaussians | ms/it | it/s | raster fwd | raster bwd | MLP fwd | MLP bwd | "

@@ -9,7 +9,7 @@ read from the event files), so L_hat is the quantity the events measure. Each st
    same time window on other cameras; N_gt from the events and the simulator's thresholds, with
    N(0, sigma) jitter on event-free pixels (recon.event_supervision.gt_counts);
 2. renders at the window's end points, poses interpolated along each camera's trajectory (the
-   deformation field runs once per end point for every camera);
+   deformation field runs once for both end points and every camera: recon.deform's forward_times);
 3. AES: N_pred = (L_hat(t_end) - L_hat(t_start)) / C_hat with a learnable C_hat = exp(log_c);
 4. L = mean over the cameras of 1.0 L_recon + 0.005 TV(render at t_end) [+ 1.0 (L1 + D-SSIM) on a
    blurred frame, on every `rgb_every`-th step].
@@ -144,8 +144,7 @@ class E4DGS(Method):
         f = trainer.render_factor
         cams_s = [coarse_camera(dataset_camera(ds, w.camera, t_start_us), f) for w in windows]
         cams_e = [coarse_camera(dataset_camera(ds, w.camera, t_end_us), f) for w in windows]
-        outs_s = trainer.model.render_outputs(cams_s, t_s, trainer.backend)
-        outs_e = trainer.model.render_outputs(cams_e, t_e, trainer.backend)
+        outs_s, outs_e = trainer.model.render_outputs_times([cams_s, cams_e], [t_s, t_e], trainer.backend)
         intr = ds.intrinsics
         loss = 0.0
         for window, out_s, out_e in zip(windows, outs_s, outs_e):

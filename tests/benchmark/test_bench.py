@@ -321,19 +321,26 @@ def test_bench_train_breakdown_times_every_part_inside_an_iteration():
     from recon.raster import Camera
     from recon.render import render_at
 
+    from recon.render import render_views_times
+
     clock = Clock()
-    original = DeformationField.forward
+    original = DeformationField.forward, DeformationField.forward_times
     restore = instrument(clock)
     try:
         g = GaussianModel.from_points(np.random.default_rng(0).uniform(-0.5, 0.5, (300, 3)), channels=1)
         field = DeformationField()
         cam = Camera(torch.tensor([[60.0, 0, 32], [0, 60.0, 24], [0, 0, 1]]),
                      torch.tensor([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3], [0, 0, 0, 1]]), 64, 48)
-        for precision in ("float32", "bfloat16"):
+        # one time (render_at: forward), and E-4DGS's two ends of a window in one call (forward_times)
+        for precision, times in [("float32", None), ("bfloat16", None), ("float32", [0.4, 0.5]), ("bfloat16", [0.4, 0.5])]:
             clock.parts = dict.fromkeys(PARTS, 0.0)
             t0 = time.perf_counter()
-            out = render_at(g, field, cam, 0.4, torch.zeros(1), "cpu", precision)
-            (out.image.square().mean() + g.means.sum() * 0).backward()
+            if times is None:
+                images = [render_at(g, field, cam, 0.4, torch.zeros(1), "cpu", precision).image]
+            else:
+                images = [o[0].image for o in render_views_times(g, field, [[cam], [cam]], times, torch.zeros(1),
+                                                                   "cpu", precision)]
+            (sum(im.square().mean() for im in images) + g.means.sum() * 0).backward()
             total = time.perf_counter() - t0
             seen = ("raster_fwd", "raster_bwd", "mlp_fwd", "mlp_bwd")     # an MLP render: no trajectory, data or Adam
             assert all(0 < clock.parts[p] < total for p in seen), (precision, clock.parts)
@@ -341,7 +348,7 @@ def test_bench_train_breakdown_times_every_part_inside_an_iteration():
             assert not clock.mlp_started
     finally:
         restore()
-    assert DeformationField.forward is original
+    assert (DeformationField.forward, DeformationField.forward_times) == original
 
 
 def test_bench_train_times_a_trained_state_with_its_data_and_optimiser(motion_scene, tmp_path):
@@ -585,6 +592,10 @@ def test_bench_train_times_the_mlp_at_each_precision_and_the_trajectories_beside
     # --against pairs this tree's workers with the revision's factor by factor
     from tools.bench_train import revision_factors
     assert [f for _, _, f in worker_specs(None, [], [2, 4])] == revision_factors([2, 4]) == [1, 2, 4]
+    # ... and runs with the same --set overrides, so the trees differ in their code only
+    from tools.bench_train import revision_specs
+    sets = {"train.deform_field.width": 96}
+    assert revision_specs("abc", [2], sets) == [("abc", sets, 1), ("abc, 1/2 resolution", sets, 2)]
 
 
 def test_a_study_the_preset_lacks_is_an_error_and_leaves_nothing(tmp_path, capsys):

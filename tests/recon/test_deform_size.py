@@ -95,3 +95,41 @@ def test_the_split_skip_product_equals_the_concatenated_reference_forward_and_ba
         fast, ref = f.float()(x.float(), 0.5), f.forward_ref(x.float(), 0.5)
     for u, v in zip(fast, ref):
         torch.testing.assert_close(u.float(), v.float(), rtol=0.05, atol=0.02)
+
+
+@pytest.mark.parametrize("depth, width, times", [(8, 256, [0.2, 0.25]), (4, 64, [0.0, 1.0, 0.5]), (3, 16, [0.7]),
+                                                 (3, 8, [0.3, 0.3])])
+def test_several_times_in_one_call_equal_the_reference_at_each_time_forward_and_backward(depth, width, times):
+    torch.manual_seed(width)
+    f = DeformationField(depth, width).double()
+    for head in (f.warp, f.rotation, f.scaling):
+        torch.nn.init.normal_(head.weight, std=0.1)
+    x = torch.rand(40, 3, dtype=torch.float64)
+    weights = torch.rand(len(times), 3, dtype=torch.float64)          # a loss that tells the times apart
+    grads = []
+    for outs in (lambda: f.forward_times(x, times), lambda: [f.forward_ref(x, t) for t in times]):
+        f.zero_grad()
+        res = outs()
+        sum(weights[k, j] * (o ** 2).sum() for k, r in enumerate(res) for j, o in enumerate(r)).backward()
+        grads.append((res, [p.grad.clone() for p in f.parameters()]))
+    (a, ga), (b, gb) = grads
+    assert len(a) == len(times)
+    for ra, rb in zip(a, b):
+        for u, v in zip(ra, rb):
+            assert u.shape == v.shape
+            torch.testing.assert_close(u, v, rtol=1e-12, atol=1e-12)
+    for u, v in zip(ga, gb):
+        torch.testing.assert_close(u, v, rtol=1e-10, atol=1e-12)
+    assert any(g.abs().max() > 0 for g in ga)
+    f = f.float()
+    with torch.autocast("cpu", dtype=torch.bfloat16):     # bf16: the same up to bf16 rounding
+        fast, ref = f.forward_times(x.float(), times), [f(x.float(), t) for t in times]
+    for ra, rb in zip(fast, ref):
+        for u, v in zip(ra, rb):
+            torch.testing.assert_close(u.float(), v.float(), rtol=0.05, atol=0.02)
+
+
+@pytest.mark.parametrize("times", [[], [0.2, 1.5], [-0.1]])
+def test_times_out_of_range_are_refused(times):
+    with pytest.raises(ValueError, match="times in \\[0, 1\\]"):
+        DeformationField(2, 8).forward_times(torch.rand(3, 3), times)

@@ -152,8 +152,8 @@ def test_rgb_variant_renders_blur_as_the_mean_over_the_exposure(motion_scene, tm
 
 def test_multi_view_step_supervises_the_same_time_window_on_distinct_cameras(motion_scene, tmp_path):
     """views_per_step: the other cameras' windows cover the first window's interval exactly (their
-    events are the file's events in (t_start, t_end]); the deformation runs once per end point for
-    every camera; the loss is the mean of the single-camera losses; too many cameras is an error."""
+    events are the file's events in (t_start, t_end]); the deformation runs once for both end points
+    and every camera; the loss is the mean of the single-camera losses; too many cameras is an error."""
     from eventio.h5io import read_events
 
     tr = trainer_for(motion_scene, tmp_path, **{"events.views_per_step": 2, "events.noise_sigma": 0.0})
@@ -171,13 +171,14 @@ def test_multi_view_step_supervises_the_same_time_window_on_distinct_cameras(mot
             np.testing.assert_array_equal(np.sort(ev["x"][inside].astype(int) * 100 + ev["y"][inside]),
                                           np.sort(w.x.astype(int) * 100 + w.y))
     calls = []
-    field_forward = tr.model.deform.forward
-    tr.model.deform.forward = lambda *a, **k: calls.append(1) or field_forward(*a, **k)
+    field_times = tr.model.deform.forward_times
+    tr.model.deform.forward_times = lambda x, times: calls.append(list(times)) or field_times(x, times)
     loss, renders = tr.method.event_loss(tr, windows)
-    assert len(calls) == 2 and len(renders) == 4                # 2 end points x 2 cameras
+    t_s, t_e = (w / ds.duration_us for w in (windows[0].t_start_us, windows[0].t_end_us))
+    assert calls == [[pytest.approx(t_s), pytest.approx(t_e)]] and len(renders) == 4   # 1 call, 2 end points x 2 cameras
     single = [tr.method.event_loss(tr, [w])[0].item() for w in windows]
     assert loss.item() == pytest.approx(np.mean(single), rel=1e-6)
-    tr.model.deform.forward = field_forward
+    tr.model.deform.forward_times = field_times
     loss.backward()
     assert tr.model.gaussians.means.grad.abs().sum() > 0
     with pytest.raises(ValueError, match="views_per_step"):

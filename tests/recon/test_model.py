@@ -154,3 +154,38 @@ def test_render_at_with_an_untrained_field_equals_the_static_model():
         assert static.alpha.max() > 0.5
         with pytest.raises(ValueError, match=r"time must lie in \[0, 1\]"):
             render_at(model, field, cam, 1.5, bg)
+
+
+@pytest.mark.parametrize("kind", ["mlp", "trajectory", "none"])
+def test_renders_at_several_times_in_one_call_equal_one_call_per_time(kind):
+    from scene_format.cameras import look_at_opencv
+    from recon.deform import make_field
+    from recon.gaussians import GaussianModel
+    from recon.render import camera_from_pose, render_views, render_views_times
+
+    g = torch.Generator().manual_seed(5)
+    model = GaussianModel.from_points((torch.rand(150, 3, generator=g) - 0.5).numpy(), sh_degree=1,
+                                      colors=torch.rand(150, 3, generator=g))
+    field = None
+    if kind == "mlp":
+        field = DeformationField(depth=4, width=32)
+        for head in (field.warp, field.rotation, field.scaling):
+            torch.nn.init.normal_(head.weight, std=0.05)
+    elif kind == "trajectory":
+        field = make_field({"kind": "trajectory", "degree": 2, "fourier": 1})
+        model.enable_motion(field.n_basis)
+        with torch.no_grad():
+            model.motion.normal_(0.0, 0.05, generator=g)
+    K = np.array([[40.0, 0, 24], [0, 40.0, 18], [0, 0, 1]])
+    cams = [camera_from_pose(K, look_at_opencv(p, (0.0, 0.0, 0.0)), 48, 36) for p in [(2.0, -2.5, 1.0), (-2.0, 2.0, 1.5)]]
+    bg = torch.zeros(3)
+    times = [0.1, 0.9]
+    both = render_views_times(model, field, [cams, cams[:1]], times, bg)
+    assert [len(r) for r in both] == [2, 1]
+    for outs, t in zip(both, times):
+        for out, ref in zip(outs, render_views(model, field, cams, t, bg)):
+            torch.testing.assert_close(out.image, ref.image, rtol=1e-5, atol=1e-6)
+    if field is not None:          # the two times differ, so the shared call did not reuse one time's state
+        assert (both[0][0].image - both[1][0].image).abs().max() > 1e-4
+    with pytest.raises(ValueError, match="one camera list per time"):
+        render_views_times(model, field, [cams], times, bg)
