@@ -55,27 +55,30 @@ def check_time(t: float) -> float:
     return t
 
 
+def _offset(gaussians: GaussianModel, dx: torch.Tensor, dq: torch.Tensor, ds: torch.Tensor):
+    """(means, quats, log_scales) + a field's offsets, brought back to the parameters' dtype."""
+    dtype = gaussians.means.dtype
+    return gaussians.means + dx.to(dtype), gaussians.quats + dq.to(dtype), gaussians.log_scales + ds.to(dtype)
+
+
 def deformed_times(gaussians: GaussianModel, field: DeformationField | None, times: list[float],
                    precision: str = "float32") -> list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """[deformed(gaussians, field, t, precision) for t in times], with one field call for all times."""
-    means, quats, log_scales = gaussians.means, gaussians.quats, gaussians.log_scales
     if field is None or len(gaussians) == 0:
-        return [(means, quats, log_scales) for _ in times]
-    with autocast(precision, means.device):
+        return [(gaussians.means, gaussians.quats, gaussians.log_scales) for _ in times]
+    with autocast(precision, gaussians.means.device):
         offsets = field.deform_times(gaussians, times)
-    return [(means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype))
-            for dx, dq, ds in offsets]
+    return [_offset(gaussians, *o) for o in offsets]
 
 
 def deformed(gaussians: GaussianModel, field: DeformationField | None, t: float, precision: str = "float32"):
     """Means [N,3], quaternions [N,4] and log-scales [N,3] at normalised time t (field None: canonical);
     the field computes in `precision` (float32, or bfloat16 autocast; its outputs come back float32)."""
-    means, quats, log_scales = gaussians.means, gaussians.quats, gaussians.log_scales
     if field is None or len(gaussians) == 0:
-        return means, quats, log_scales
-    with autocast(precision, means.device):
-        dx, dq, ds = field.deform(gaussians, t)
-    return means + dx.to(means.dtype), quats + dq.to(means.dtype), log_scales + ds.to(means.dtype)
+        return gaussians.means, gaussians.quats, gaussians.log_scales
+    with autocast(precision, gaussians.means.device):
+        offsets = field.deform(gaussians, t)
+    return _offset(gaussians, *offsets)
 
 
 def render_at(gaussians: GaussianModel, field: DeformationField | None, camera: Camera, t: float,
