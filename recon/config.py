@@ -24,14 +24,17 @@ from common.config import MAX_ITERATIONS, SEED_RANGE, ConfigError, check_positiv
 
 PRECISIONS = ("auto", "float32", "bfloat16")      # train.precision's values (recon.precision chooses for auto)
 PAPER_SIZE = (8, 256)    # depth, width of the paper's (D3DGS's) deformation MLP
+PAPER_POSITION_FREQS = 10  # D3DGS's position encoding: sin / cos at 2^0 .. 2^9
 
 
-def mlp_spec(depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1]) -> dict:
-    """recon.deform.make_field's spec of an MLP: {"kind": "mlp"} for the paper's size (what runs
-    recorded before the size was a choice), with depth and width otherwise."""
-    if (depth, width) == PAPER_SIZE:
-        return {"kind": "mlp"}
-    return {"kind": "mlp", "depth": depth, "width": width}
+def mlp_spec(depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1], position_freqs: int = PAPER_POSITION_FREQS) -> dict:
+    """recon.deform.make_field's spec of an MLP: {"kind": "mlp"} for the paper's field (what runs
+    recorded before the size was a choice), with depth and width for another size, and
+    position_freqs where the position encoding is not the paper's."""
+    spec = {"kind": "mlp"} if (depth, width) == PAPER_SIZE else {"kind": "mlp", "depth": depth, "width": width}
+    if position_freqs != PAPER_POSITION_FREQS:
+        spec["position_freqs"] = position_freqs
+    return spec
 
 REFERENCE_ITERATIONS = 40_000
 MIN_DENSIFY_INTERVAL = 10
@@ -137,6 +140,7 @@ class DeformFieldConfig:
     smoothness: float = 0.0  # trajectory: weight of the acceleration energy (0: off)
     depth: int = 8  # mlp: linear layers (the encoded input joins again after depth // 2)
     width: int = 256  # mlp: hidden units per layer
+    position_freqs: int = 10  # mlp: sin / cos pairs of the position encoding (2^0 .. 2^(n-1)); D3DGS's 10
 
     def __post_init__(self):
         if self.degree < 0 or self.fourier < 0 or self.degree + self.fourier == 0:
@@ -152,7 +156,7 @@ class DeformFieldConfig:
     def spec(self) -> dict:
         """recon.deform.make_field's spec of this field."""
         if self.kind == "mlp":
-            return mlp_spec(self.depth, self.width)
+            return mlp_spec(self.depth, self.width, self.position_freqs)
         return {"kind": "trajectory", "degree": self.degree, "fourier": self.fourier}
 
 
@@ -290,6 +294,7 @@ DeformFieldConfig.BOUNDS = {
     "degree": (0, 16, "polynomial degree of a trajectory"), "fourier": (0, 64, "sine / cosine pairs per trajectory"),
     "lr_scale": (0.0, 1e3, "a multiple of the means' rate"), "smoothness": (0.0, 1e6, "a loss weight"),
     "depth": (3, 16, "the MLP's linear layers"), "width": (8, 1024, "the MLP's hidden units"),
+    "position_freqs": (0, 16, "sin / cos pairs of the position encoding"),
 }
 TrainConfig.BOUNDS = {
     "iterations": (1, MAX_ITERATIONS, "200x the paper's 50,000"), "schedule_reference": (1, MAX_ITERATIONS, "iterations"),

@@ -46,7 +46,7 @@ class DeformationField(nn.Module):
             nn.init.zeros_(head.bias)
 
     def spec(self) -> dict:
-        return mlp_spec(self.depth, self.width)
+        return mlp_spec(self.depth, self.width, self.x_freqs)
 
     def deform(self, gaussians, t: float):
         """(dx, dq, dlog_s) of `gaussians` at normalised time t: the MLP at their deformation inputs."""
@@ -152,13 +152,15 @@ class DeformationField(nn.Module):
 
 def make_field(spec: dict | None = None) -> nn.Module:
     """The deformation field a spec names: {"kind": "mlp"} (the paper's MLP, the default; "depth" and
-    "width" for another size) or {"kind": "trajectory", "degree": d, "fourier": L} (per-Gaussian
+    "width" for another size, "position_freqs" for another position encoding) or {"kind": "trajectory", "degree": d, "fourier": L} (per-Gaussian
     trajectories, recon.trajectory)."""
     from recon.trajectory import TrajectoryField
 
     spec = dict(spec or {"kind": "mlp"})
     kind = spec.pop("kind", "mlp")
-    if kind == "mlp" and set(spec) <= {"depth", "width"}:
+    if kind == "mlp" and set(spec) <= {"depth", "width", "position_freqs"}:
+        if "position_freqs" in spec:
+            spec["x_freqs"] = spec.pop("position_freqs")
         return DeformationField(**spec)
     if kind == "trajectory":
         return TrajectoryField(**spec)

@@ -38,7 +38,8 @@ def test_the_papers_size_is_recorded_as_before():
     assert cfg.train.deform_field.spec() == mlp_spec(4, 128)        # the config writes what the field writes
 
 
-@pytest.mark.parametrize("key, value", [("depth", 2), ("depth", 17), ("depth", 4.5), ("width", 4), ("width", 2048)])
+@pytest.mark.parametrize("key, value", [("depth", 2), ("depth", 17), ("depth", 4.5), ("width", 4), ("width", 2048),
+                                        ("position_freqs", -1), ("position_freqs", 17), ("position_freqs", 8.5)])
 def test_sizes_out_of_range_are_refused_by_name(key, value):
     with pytest.raises(ConfigError, match=key):
         recon.resolve_config("e4dgs", overrides={f"train.deform_field.{key}": value})
@@ -60,15 +61,36 @@ def test_precision_is_measured_for_the_size_it_runs(tmp_path):
     assert set(ms) == {"float32", "bfloat16"} and all(v > 0 for v in ms.values())
 
 
+@pytest.mark.parametrize("freqs", [0, 6, 8, 10])
+def test_the_position_encodings_frequencies_set_the_first_layers_and_are_recorded(freqs):
+    cfg = recon.resolve_config("e4dgs", overrides={"train.deform_field.depth": 4, "train.deform_field.width": 16,
+                                                   "train.deform_field.position_freqs": freqs})
+    spec = cfg.train.deform_field.spec()
+    assert spec == ({"kind": "mlp", "depth": 4, "width": 16} if freqs == 10
+                    else {"kind": "mlp", "depth": 4, "width": 16, "position_freqs": freqs})   # 10 recorded as before
+    f = make_field(spec)
+    assert f.x_freqs == freqs and f.spec() == spec
+    assert sum(p.numel() for p in f.parameters()) == n_params(4, 16, x_freqs=freqs)
+    enc = 3 * (1 + 2 * freqs) + 13
+    assert f.layers[0].in_features == enc and f.layers[3].in_features == 16 + enc    # the skip reads it again
+    x = torch.rand(9, 3) * 2 - 1
+    for head in (f.warp, f.rotation, f.scaling):
+        torch.nn.init.normal_(head.weight, std=0.1)
+    fast, ref = f.forward_times(x, [0.2, 0.9]), [f.forward_ref(x, t) for t in (0.2, 0.9)]
+    for ra, rb in zip(fast, ref):
+        for u, v in zip(ra, rb):
+            torch.testing.assert_close(u, v, rtol=1e-5, atol=1e-6)
+
+
 def test_a_small_field_trains_saves_and_loads_as_itself(motion_scene, tmp_path):
     over = {"train.iterations": 12, "train.warm_up": 4, "train.scale_schedule": False, "train.init.n_points_object": 300,
             "train.snapshots": [1.0], "train.densify.enabled": False, "train.precision": "float32", "train.device": "cpu",
-            "train.deform_field.depth": 4, "train.deform_field.width": 32}
+            "train.deform_field.depth": 4, "train.deform_field.width": 32, "train.deform_field.position_freqs": 7}
     model = recon.fit(motion_scene, "d3dgs", overrides=over, out_dir=tmp_path / "run", progress=False).model
-    assert model.meta.deform_field == {"kind": "mlp", "depth": 4, "width": 32}
+    assert model.meta.deform_field == {"kind": "mlp", "depth": 4, "width": 32, "position_freqs": 7}
     assert model.deform.warp.weight.abs().max() > 0                    # the heads learned
     loaded = recon.load(tmp_path / "run")
-    assert (loaded.deform.depth, loaded.deform.width) == (4, 32)
+    assert (loaded.deform.depth, loaded.deform.width, loaded.deform.x_freqs) == (4, 32, 7)
     assert torch.equal(loaded.render(0, 0.7), model.render(0, 0.7))
 
 
