@@ -140,7 +140,7 @@ class DeformFieldConfig:
     smoothness: float = 0.0  # trajectory: weight of the acceleration energy (0: off)
     depth: int = 8  # mlp: linear layers (the encoded input joins again after depth // 2)
     width: int = 256  # mlp: hidden units per layer
-    position_freqs: int = 10  # mlp: sin / cos pairs of the position encoding (2^0 .. 2^(n-1)); D3DGS's 10
+    position_freqs: int = PAPER_POSITION_FREQS  # mlp: sin / cos pairs of the position encoding (2^0 .. 2^(n-1)); D3DGS's 10
 
     def __post_init__(self):
         if self.degree < 0 or self.fourier < 0 or self.degree + self.fourier == 0:

@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from recon.config import PAPER_SIZE, mlp_spec  # noqa: F401  (the field's spec, written once)
+from recon.config import PAPER_POSITION_FREQS, PAPER_SIZE, mlp_spec  # noqa: F401  (the field's spec, written once)
 from recon.deform_kernels import mlp_times
 
 
@@ -29,7 +29,8 @@ def positional_encoding(x: torch.Tensor, n_freqs: int) -> torch.Tensor:
 class DeformationField(nn.Module):
     kind = "mlp"
 
-    def __init__(self, depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1], x_freqs: int = 10, t_freqs: int = 6):
+    def __init__(self, depth: int = PAPER_SIZE[0], width: int = PAPER_SIZE[1], x_freqs: int = PAPER_POSITION_FREQS,
+                 t_freqs: int = 6):
         super().__init__()
         self.depth, self.width, self.x_freqs, self.t_freqs = depth, width, x_freqs, t_freqs
         self.skip = depth // 2
@@ -91,7 +92,7 @@ class DeformationField(nn.Module):
         return mlp_times(self, ex, et)
 
     def _encodings(self, x: torch.Tensor, times: list[float]):
-        """(gamma(x) [N, 63], gamma(t) [K, 13]) of positions (gradient stopped) and checked times."""
+        """(gamma(x) [N, 3 (1 + 2 x_freqs)], gamma(t) [K, 13]) of positions (gradient stopped) and checked times."""
         x = x.detach()
         t = torch.as_tensor([float(v) for v in times], dtype=x.dtype, device=x.device)
         if t.ndim != 1 or t.numel() == 0 or not torch.all((t >= 0) & (t <= 1)):
@@ -108,7 +109,7 @@ class DeformationField(nn.Module):
         end of an event window computes gamma(x) and those two products once. A 4 x 96 field at 5,650
         points, K = 2, forward + backward: ~12 % less time than two calls (docs/design/recon.md).
         """
-        ex, et = self._encodings(x, times)                     # [N, 63], [K, 13]
+        ex, et = self._encodings(x, times)                     # [N, 3 (1 + 2 x_freqs)], [K, 13]
         if torch.is_autocast_enabled(x.device.type):
             dt = torch.get_autocast_dtype(x.device.type)
             ex, et = ex.to(dt), et.to(dt)
